@@ -1,0 +1,23 @@
+"""whitted's harness: the same scenes rendered on Mitsuba 3, compared with the tracer.
+
+Importing this package imports :mod:`tracer` first, so that a usable libLLVM
+is chosen before Dr.Jit (and Mitsuba, which loads it) start. Mitsuba itself is
+imported on demand by :func:`mitsuba`, never by ``whitted render``.
+"""
+
+import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+
+
+def mitsuba():
+    """Mitsuba, with the variant of the tracer's backend set and our plugins registered."""
+    from tracer import backend
+
+    backend.use()
+    import mitsuba as mi
+
+    variant = backend.mitsuba_variant()
+    if mi.variant() != variant:
+        mi.set_variant(variant)
+    from reference import integrators  # noqa: F401  (registers the `whitted` integrator)
+
+    return mi

@@ -1,0 +1,311 @@
+"""The ``whitted`` command: render with the tracer, render on Mitsuba, compare, export.
+
+Every subcommand is a thin layer over a Python function; exit status 0 on
+success (for ``compare``: within the scene's tolerance), 1 when a comparison
+fails, 2 on bad input (scene, options, output path, missing libLLVM).
+``whitted render`` never imports Mitsuba.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import sys
+import time
+from pathlib import Path
+
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+
+SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+
+
+# ---------------------------------------------------------------- helpers
+
+
+def _size(text: str) -> tuple[int, int]:
+    try:
+        w, h = text.lower().split("x")
+        size = int(w), int(h)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT such as 320x240, got {text!r}") \
+            from None
+    if size[0] < 1 or size[1] < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive size, got {text!r}")
+    return size
+
+
+def _positive(text: str) -> int:
+    try:
+        v = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}") from None
+    if v < 1:
+        raise argparse.ArgumentTypeError(f"expected a positive integer, got {text!r}")
+    return v
+
+
+def resolve_scene(name: str) -> Path:
+    """A scene path, or the name of a built-in scene (``sphere_point`` -> scenes/sphere_point.toml)."""
+    p = Path(name)
+    if p.exists() or p.suffix == ".toml" or os.sep in name:
+        return p
+    builtin = SCENES_DIR / f"{name}.toml"
+    return builtin if builtin.exists() else p
+
+
+def builtin_scenes() -> list[Path]:
+    return sorted(SCENES_DIR.glob("*.toml"))
+
+
+def load(args):
+    from tracer import load_scene
+
+    scene = load_scene(resolve_scene(args.scene))
+    return scene.with_overrides(spp=args.spp, max_depth=args.max_depth, size=args.size)
+
+
+def _note_spp(scene) -> None:
+    n = scene.film.strata
+    if n * n != scene.film.spp:
+        print(f"whitted: note: spp {scene.film.spp} is not a square; using {n * n} "
+              f"({n}x{n} strata), as Mitsuba's stratified sampler does", file=sys.stderr)
+
+
+class Progress:
+    """A one-line progress bar on stderr, shown only on a terminal."""
+
+    def __init__(self, label: str, enabled: bool | None = None):
+        self.label = label
+        self.enabled = sys.stderr.isatty() if enabled is None else enabled
+        self.start = time.perf_counter()
+
+    def __call__(self, done: int, total: int) -> None:
+        if not self.enabled or total <= 0:
+            return
+        frac = done / total
+        bar = "#" * int(30 * frac)
+        sys.stderr.write(f"\r{self.label} [{bar:<30}] {100 * frac:5.1f}% "
+                         f"{time.perf_counter() - self.start:6.1f}s")
+        if done >= total:
+            sys.stderr.write("\n")
+        sys.stderr.flush()
+
+
+def _backend(args) -> str:
+    from tracer import backend
+
+    return backend.use(args.backend)
+
+
+def _describe(scene) -> str:
+    f = scene.film
+    return f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth}"
+
+
+# ---------------------------------------------------------------- subcommands
+
+
+def cmd_render(args) -> int:
+    from tracer.imageio import check_output_path, write_image
+
+    out = check_output_path(args.output)
+    scene = load(args)
+    _note_spp(scene)
+    name = _backend(args)
+    from tracer.integrator import Integrator
+
+    result = Integrator(scene, seed=args.seed).render(Progress(f"render {scene.name}"))
+    write_image(out, result.image)
+    rays = ", ".join(str(r) for r in result.rays_per_level)
+    print(f"wrote {out} ({_describe(scene)}, {name}) in {result.seconds:.3f} s; "
+          f"rays per level: {rays}; shadow rays: {sum(result.shadow_rays_per_level)}")
+    return EXIT_OK
+
+
+def cmd_reference(args) -> int:
+    from tracer.imageio import check_output_path, write_image
+
+    out = check_output_path(args.output)
+    scene = load(args)
+    _note_spp(scene)
+    name = _backend(args)
+    from reference.render import render_reference
+
+    result = render_reference(scene, args.integrator, seed=args.seed)
+    write_image(out, result.image)
+    print(f"wrote {out} (Mitsuba, {args.integrator} integrator, {_describe(scene)}, "
+          f"{name}) in {result.seconds:.3f} s")
+    return EXIT_OK
+
+
+def format_comparison(c) -> str:
+    m = c.metrics
+    lines = [f"scene {c.scene}: {c.size[0]}x{c.size[1]}, {c.spp} spp, backend {c.backend}, "
+             f"reference integrator {c.integrator}, test {c.test}"]
+    lines.append(f"  {'check':<26}{'value':>12}  {'limit':>10}")
+    labels = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
+              "mean_rel_diff": "image means differ by", "z_fraction_passed": "z-test pixels passing",
+              "block_median_rel": "4x4 blocks: median rel.",
+              "block_frac_over_5pct": "4x4 blocks beyond 5 %"}
+    for k, ch in c.checks.items():
+        rel = ">=" if k == "z_fraction_passed" else "<"
+        pct = k in ("frac_over_5pct", "z_fraction_passed", "block_frac_over_5pct")
+        val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
+        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
+        lines.append(f"  {labels.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
+                     f"{'pass' if ch['pass'] else 'FAIL'}")
+    flip = "n/a" if m["flip"] is None else f"{m['flip']:.4f}"
+    lines.append(f"  RMSE {m['rmse']:.3e}   mean rel. {m['mean_rel']:.2e}   "
+                 f"max rel. {m['max_rel']:.2e}   FLIP {flip}")
+    s = c.seconds
+    ratio = s.get("ratio_mitsuba_over_tracer")
+    lines.append(f"  seconds: tracer {s['tracer']:.3f}, Mitsuba {s['mitsuba']:.3f}"
+                 + (f" (Mitsuba / tracer = {ratio:.2f})" if ratio else ""))
+    lines.append(("PASS" if c.passed else "FAIL") + f" ({c.reason})")
+    return "\n".join(lines)
+
+
+def cmd_compare(args) -> int:
+    scene = load(args)
+    _note_spp(scene)
+    outdir = Path(args.output) if args.output else Path("out") / "compare" / scene.name
+    if outdir.exists() and not outdir.is_dir():
+        from tracer.errors import UserError
+
+        raise UserError(f"{outdir}: exists and is not a folder")
+    _backend(args)
+    from reference.compare import compare_scene
+
+    result, _, _ = compare_scene(scene, outdir, args.integrator,
+                                 progress=Progress(f"render {scene.name}"))
+    print(format_comparison(result))
+    print(f"wrote {outdir}/tracer.exr, mitsuba.exr, diff.png, metrics.json")
+    return EXIT_OK if result.passed else EXIT_FAIL
+
+
+def cmd_export(args) -> int:
+    from tracer.errors import UserError
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".xml":
+        raise UserError(f"{out}: expected a .xml file name")
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise UserError(f"{out}: folder {out.parent} does not exist")
+    scene = load(args)
+    from reference.mitsuba_scene import write_xml
+
+    files = write_xml(scene, out, args.integrator)
+    print("wrote " + ", ".join(str(f) for f in files))
+    return EXIT_OK
+
+
+def cmd_scenes(args) -> int:
+    from tracer import load_scene
+
+    for p in builtin_scenes():
+        s = load_scene(p)
+        print(f"{p.stem:<24} {_describe(s):<34} {s.description}")
+    return EXIT_OK
+
+
+# ---------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(
+        prog="whitted",
+        description="A Whitted ray tracer on Dr.Jit that proves itself against Mitsuba 3. "
+                    "SCENE is a TOML scene file or the name of a built-in scene "
+                    "(see `whitted scenes`).",
+        epilog="Exit status: 0 success, 1 comparison outside tolerance, 2 bad input.")
+    p.add_argument("--version", action="version", version=_version())
+    sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
+
+    def scene_opts(sp, output_help=None, output_required=True):
+        sp.add_argument("scene", metavar="SCENE", help="scene file (.toml) or built-in name")
+        if output_help:
+            sp.add_argument("-o", "--output", required=output_required, help=output_help)
+        sp.add_argument("--spp", type=_positive, help="samples per pixel (rounded up to a square)")
+        sp.add_argument("--max-depth", type=_positive, dest="max_depth",
+                        help="path segments, as Mitsuba counts them (2 = direct light)")
+        sp.add_argument("--size", type=_size, metavar="WxH", help="image size, e.g. 320x240")
+        sp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                        help="Dr.Jit backend (default: WHITTED_BACKEND or auto: CUDA if "
+                             "there is a GPU, else LLVM)")
+        sp.add_argument("--seed", type=int, default=0,
+                        help="seed for the random numbers (area lights only)")
+
+    r = sub.add_parser("render", help="render a scene with the tracer (no Mitsuba involved)",
+                       description="Render SCENE with whitted's own tracer.")
+    scene_opts(r, "output image: .exr (linear float32), .png (sRGB 8-bit) or .ppm "
+                  "(plain text, as Heckbert's minray prints it)")
+    r.set_defaults(func=cmd_render)
+
+    ref = sub.add_parser("reference", help="render a scene on Mitsuba 3",
+                         description="Render SCENE on Mitsuba 3 after converting it to Mitsuba's "
+                                     "plugins.")
+    scene_opts(ref, "output image (.exr, .png or .ppm)")
+    ref.add_argument("--integrator", choices=("whitted", "direct", "path"), default="whitted",
+                     help="Mitsuba integrator: whitted (ours, every light once per sample; "
+                          "default), direct or path (Mitsuba's)")
+    ref.set_defaults(func=cmd_reference)
+
+    c = sub.add_parser("compare", help="render with both and compare",
+                       description="Render SCENE with the tracer and with Mitsuba, write "
+                                   "tracer.exr, mitsuba.exr, diff.png and metrics.json into DIR, "
+                                   "print the metrics, and exit 0 within the scene's tolerance, "
+                                   "1 outside it.")
+    scene_opts(c, "output folder (default: out/compare/SCENE_NAME)", output_required=False)
+    c.add_argument("--integrator", choices=("whitted", "direct"), default="whitted",
+                   help="reference integrator (default whitted; direct only for scenes "
+                        "without mirrors, glass or area lights)")
+    c.set_defaults(func=cmd_compare)
+
+    e = sub.add_parser("export", help="write the scene as Mitsuba 3 XML",
+                       description="Write SCENE as a Mitsuba 3 XML file that Mitsuba renders "
+                                   "to the same picture as `whitted reference`.")
+    scene_opts(e, "output .xml file (triangles go to meshes/*.obj beside it)")
+    e.add_argument("--integrator", choices=("whitted", "direct", "path"), default="whitted",
+                   help="integrator written into the XML (whitted needs `import reference` "
+                        "before loading; direct and path are stock Mitsuba)")
+    e.set_defaults(func=cmd_export)
+
+    s = sub.add_parser("scenes", help="list the built-in scenes")
+    s.set_defaults(func=cmd_scenes)
+    return p
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return f"whitted {metadata.version('whitted')}"
+    except metadata.PackageNotFoundError:
+        return "whitted (not installed)"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    from tracer import backend, llvm
+    from tracer.errors import UserError
+
+    try:
+        return args.func(args)
+    except (UserError, llvm.LLVMUnavailable, backend.BackendUnavailable) as e:
+        print(f"whitted: error: {e}", file=sys.stderr)
+        return EXIT_USAGE
+    except KeyboardInterrupt:
+        print("whitted: interrupted", file=sys.stderr)
+        return 130
+    except BrokenPipeError:
+        return EXIT_OK
+
+
+def entrypoint() -> None:
+    sys.exit(main())
+
+
+if __name__ == "__main__":
+    entrypoint()

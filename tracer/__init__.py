@@ -1,0 +1,37 @@
+"""whitted's tracer: a Whitted ray tracer vectorised with Dr.Jit, and its scene model.
+
+Importing this package first finds a libLLVM that Dr.Jit's LLVM backend can
+use (see :mod:`tracer.llvm`); it must therefore be imported before drjit.
+
+>>> from tracer import load_scene, render                 # doctest: +SKIP
+>>> result = render(load_scene("scenes/sphere_point.toml"))  # doctest: +SKIP
+>>> result.image.shape                                     # doctest: +SKIP
+(240, 320, 3)
+"""
+
+import sys as _sys
+
+from tracer import llvm as _llvm
+
+if "drjit" in _sys.modules:  # too late to choose the library; say so once
+    import os as _os
+
+    if not _os.environ.get("DRJIT_LIBLLVM_PATH"):
+        print("whitted: warning: drjit was imported before tracer; it may have loaded a "
+              "libLLVM that aborts (import tracer first)", file=_sys.stderr)
+_llvm.configure()
+
+from tracer.errors import SceneError, UserError  # noqa: E402
+from tracer.scene import Scene, load_scene  # noqa: E402
+
+__version__ = "0.1.0"
+
+
+def render(scene, progress=None):
+    """Render a :class:`~tracer.scene.Scene` and return a :class:`~tracer.integrator.RenderResult`."""
+    from tracer.integrator import render as _render
+
+    return _render(scene, progress)
+
+
+__all__ = ["Scene", "SceneError", "UserError", "load_scene", "render", "__version__"]

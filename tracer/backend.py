@@ -1,0 +1,107 @@
+"""The one place where the Dr.Jit backend (LLVM on the CPU, CUDA on a GPU) is chosen.
+
+Every module of the tracer takes its array types from :data:`jit`, a proxy for
+``drjit.llvm`` or ``drjit.cuda``; nothing else names a backend. The harness
+maps the same choice onto Mitsuba's ``llvm_ad_rgb`` / ``cuda_ad_rgb`` variants.
+
+The choice comes from, in order: :func:`use`'s argument, the ``WHITTED_BACKEND``
+environment variable (``auto``, ``llvm`` or ``cuda``), and ``auto``, which takes
+CUDA when a GPU driver answers and LLVM otherwise.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import os
+from types import ModuleType
+
+from tracer import llvm
+
+BACKENDS = ("auto", "llvm", "cuda")
+
+
+class BackendUnavailable(RuntimeError):
+    """The requested backend cannot run here; the message is one line."""
+
+
+def _cuda_driver_has_device() -> bool:
+    """Ask the CUDA driver (not Dr.Jit, which would print on failure) for a device."""
+    for name in ("libcuda.so.1", "libcuda.so", "nvcuda.dll"):
+        try:
+            lib = ctypes.CDLL(name)
+        except OSError:
+            continue
+        count = ctypes.c_int(0)
+        try:
+            if lib.cuInit(0) != 0 or lib.cuDeviceGetCount(ctypes.byref(count)) != 0:
+                return False
+        except AttributeError:
+            return False
+        return count.value > 0
+    return False
+
+
+_name: str | None = None
+_module: ModuleType | None = None
+
+
+def use(name: str | None = None) -> str:
+    """Select the backend for this process and return ``"llvm"`` or ``"cuda"``.
+
+    May be called again with the same or no name; switching backends after
+    arrays were created is refused, because arrays of the two do not mix.
+    """
+    global _name, _module
+    requested = (name or os.environ.get("WHITTED_BACKEND") or "auto").lower()
+    if requested not in BACKENDS:
+        raise BackendUnavailable(
+            f"unknown backend {requested!r} (expected one of: {', '.join(BACKENDS)})")
+    if _name is not None:
+        if requested in ("auto", _name) or name is None:
+            return _name
+        raise BackendUnavailable(
+            f"backend already set to {_name!r} in this process; cannot switch to {requested!r}")
+
+    llvm.configure()
+    if requested == "auto":
+        requested = "cuda" if _cuda_driver_has_device() else "llvm"
+    if requested == "llvm":
+        llvm.require()  # raises LLVMUnavailable with its one-line advice
+
+    import drjit as dr
+    if requested == "cuda":
+        if not _cuda_driver_has_device() or not dr.has_backend(dr.JitBackend.CUDA):
+            raise BackendUnavailable("backend 'cuda' asked for, but no CUDA device is "
+                                     "available here (use --backend llvm)")
+        import drjit.cuda as module
+    else:
+        if not dr.has_backend(dr.JitBackend.LLVM):
+            raise llvm.LLVMUnavailable(
+                f"Dr.Jit could not start its LLVM backend with {os.environ.get('DRJIT_LIBLLVM_PATH')}"
+                f": {llvm.INSTALL_HINT}")
+        import drjit.llvm as module
+    _name, _module = requested, module
+    return requested
+
+
+def name() -> str:
+    """The selected backend, selecting the default one if none was chosen yet."""
+    return use() if _name is None else _name
+
+
+def mitsuba_variant() -> str:
+    """Mitsuba's variant for the selected backend (RGB, with autodiff types)."""
+    return f"{name()}_ad_rgb"
+
+
+class _Types:
+    """Attribute access goes to ``drjit.llvm`` or ``drjit.cuda``, chosen on first use."""
+
+    def __getattr__(self, attr: str):
+        if _module is None:
+            use()
+        return getattr(_module, attr)
+
+
+#: ``jit.Float``, ``jit.UInt32``, ``jit.Array3f``, ... of the selected backend.
+jit = _Types()

@@ -1,0 +1,69 @@
+"""Primary rays of the perspective and orthographic cameras.
+
+The camera frame is Mitsuba's ``look_at(origin, target, up)``: forward
+f = normalize(target - origin), right r = normalize(f x up), up' = r x f.
+A film position (x, y) in pixels, with (0, 0) the top-left corner of the
+image and (width, height) the bottom-right, maps to normalised coordinates
+u = x / width in [0, 1] (left to right) and v = y / height in [0, 1] (top to
+bottom), so that world +x appears on the right of a camera that looks down -z
+with +y up, and row 0 is the top row.
+
+Perspective (lecture 1, "Perspective camera construction"): with the
+horizontal field of view fov and aspect = width / height, the image plane at
+distance 1 spans tan(fov / 2) to either side horizontally and
+tan(fov / 2) / aspect vertically; the ray through (u, v) has direction
+
+    d = f + (2u - 1) tan(fov/2) r + (1 - 2v) tan(fov/2) / aspect up'.
+
+Its bottom-left ray (u, v) = (0, 1) is f - tan r - tan/aspect up', its
+upper-right ray (1, 0) is f + tan r + tan/aspect up'. As in Mitsuba, the ray
+starts on the near plane (near_clip along f) and ends on the far plane.
+
+Orthographic: all rays are parallel to f; the view is ``width`` wide in
+world units and width / aspect high, and a ray starts at
+origin + (2u - 1) width/2 r + (1 - 2v) width/2 / aspect up' + near_clip f.
+"""
+
+import math
+
+import drjit as dr
+import numpy as np
+
+from tracer.backend import jit
+from tracer.scene import Camera
+
+
+def frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(right, up', forward) unit vectors of the camera, float64."""
+    f = np.subtract(camera.target, camera.origin).astype(np.float64)
+    f /= np.linalg.norm(f)
+    r = np.cross(f, camera.up)
+    r /= np.linalg.norm(r)
+    return r, np.cross(r, f), f
+
+
+def _vec(v):
+    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+
+
+def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
+    """(origin, unit direction, tmax) of the rays through film positions (pixels)."""
+    r, up, f = (_vec(x) for x in frame(camera))
+    aspect = width / height
+    sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
+    sy = 1 - 2 * (film_y / height)         # +1 top .. -1 bottom
+    eye = _vec(camera.origin)
+    if camera.type == "perspective":
+        tan_half = math.tan(math.radians(camera.fov) / 2)
+        d = f + (sx * tan_half) * r + (sy * tan_half / aspect) * up
+        length = dr.norm(d)               # = 1 / cos(angle to the axis)
+        d = d / length
+        near_t = camera.near_clip * length
+        o = eye + d * near_t
+        tmax = camera.far_clip * length - near_t
+    else:
+        half = camera.width / 2
+        o = eye + (sx * half) * r + (sy * half / aspect) * up + camera.near_clip * f
+        d = f + dr.zeros(jit.Array3f, dr.width(film_x))
+        tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))
+    return o, d, tmax

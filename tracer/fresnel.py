@@ -1,0 +1,98 @@
+"""Reflection, refraction and the Fresnel equations for smooth dielectrics.
+
+Conventions: ``cos_i`` is the cosine between the incident direction (pointing
+away from the surface, towards where the light goes back to) and the surface
+normal; positive when the ray arrives from outside (the side the normal points
+to), negative from inside. ``eta = n_inside / n_outside`` (``ior / ext_ior``).
+
+Sources: lecture 1, "The Fresnel equation", "Snell's law", "Total internal
+reflection"; Hecht, "Optics", 5th ed., section 4.6.2 (Fresnel equations);
+Schlick, "An Inexpensive BRDF Model for Physically-based Rendering",
+Computer Graphics Forum 13(3), 1994; Pharr, Jakob, Humphreys, "Physically Based
+Rendering", 4th ed., section 9.5 (dielectric BSDF).
+"""
+
+import drjit as dr
+
+
+def _sides(cos_i, eta):
+    """(|cos_i|, n_t / n_i) for a ray arriving on the side given by the sign of cos_i."""
+    outside = cos_i >= 0
+    return dr.abs(cos_i), dr.select(outside, eta, dr.rcp(eta))
+
+
+def snell_cos_t(cos_i, eta):
+    """|cos theta_t| from Snell's law n_i sin(theta_i) = n_t sin(theta_t), and a TIR mask.
+
+    sin^2(theta_t) = sin^2(theta_i) / (n_t / n_i)^2; total internal reflection
+    where that exceeds 1, i.e. beyond the critical angle asin(n_t / n_i).
+    """
+    c, rel = _sides(cos_i, eta)
+    sin2_t = (1 - c * c) / (rel * rel)
+    tir = sin2_t > 1
+    return dr.sqrt(dr.maximum(1 - sin2_t, 0)), tir
+
+
+def fresnel_exact(cos_i, eta):
+    """Fresnel reflectance of unpolarised light at a smooth dielectric boundary.
+
+    R = (r_s^2 + r_p^2) / 2 with
+    r_s = (n_i cos_i - n_t cos_t) / (n_i cos_i + n_t cos_t) and
+    r_p = (n_t cos_i - n_i cos_t) / (n_t cos_i + n_i cos_t), R = 1 under total
+    internal reflection. R + T = 1. Equal indices give R = 0 at every angle.
+    """
+    c, rel = _sides(cos_i, eta)
+    cos_t, tir = snell_cos_t(cos_i, eta)
+    r_s = (c - rel * cos_t) / (c + rel * cos_t)
+    r_p = (rel * c - cos_t) / (rel * c + cos_t)
+    r = 0.5 * (r_s * r_s + r_p * r_p)
+    return dr.select(tir, 1.0, r)
+
+
+def schlick_r0(eta):
+    """Reflectance at normal incidence, R0 = ((n1 - n2) / (n1 + n2))^2 = ((eta - 1) / (eta + 1))^2."""
+    return dr.square((eta - 1) / (eta + 1))
+
+
+def fresnel_schlick(cos_i, eta):
+    """Schlick's approximation R0 + (1 - R0) (1 - cos)^5.
+
+    The cosine is taken on the less dense side: the incident angle when the
+    ray goes into the denser medium, the transmitted angle when it leaves it.
+    With the incident angle on the dense side the curve would not reach 1 at
+    the critical angle; this way it is continuous there, and total internal
+    reflection gives R = 1.
+    """
+    c, rel = _sides(cos_i, eta)
+    cos_t, tir = snell_cos_t(cos_i, eta)
+    cos_light = dr.select(rel >= 1, c, cos_t)
+    r0 = schlick_r0(eta)
+    r = r0 + (1 - r0) * (1 - cos_light) ** 5
+    return dr.select(tir, 1.0, r)
+
+
+def reflect(d, n):
+    """Mirror direction of ``d`` (travelling towards the surface) about unit normal ``n``.
+
+    Law of reflection: angle of incidence equals angle of reflection, in the
+    plane of d and n: r = d - 2 (d . n) n.
+    """
+    return d - 2 * dr.dot(d, n) * n
+
+
+def refract(d, n, eta):
+    """Refracted direction of the unit ``d`` (travelling towards the surface) and a TIR mask.
+
+    ``n`` is the surface normal pointing outside (towards ext_ior), ``eta`` =
+    ior / ext_ior. With cos_i = -d . n and rel = n_t / n_i (as Snell's law is
+    written above), t = d / rel + (cos_i / rel - cos_t) n', where n' is n
+    flipped to the side the ray comes from. |t| = 1, and
+    n_i sin(theta_i) = n_t sin(theta_t).
+    """
+    cos_i = -dr.dot(d, n)
+    c, rel = _sides(cos_i, eta)
+    cos_t, tir = snell_cos_t(cos_i, eta)
+    n_facing = dr.select(cos_i >= 0, n, -n)
+    inv = dr.rcp(rel)
+    t = inv * d + (inv * c - cos_t) * n_facing
+    return t, tir

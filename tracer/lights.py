@@ -1,0 +1,111 @@
+"""Light sources: the radiance each one delivers to a point, as pure functions.
+
+Units are Mitsuba 3's (see the scene format): point and spot ``intensity`` I in
+W/sr, directional ``irradiance`` E in W/m^2 normal to the light, area
+``radiance`` L in W/(m^2 sr). Each function returns, for shading points p, the
+unit direction wi towards the light, the distance to it (inf for a
+directional light) and the incident quantity that multiplies BRDF x cos:
+
+* point: I / r^2 (inverse-square law; lecture 1, "Light attenuation");
+* spot: I falloff(theta) / r^2, where falloff is Mitsuba's: 1 inside
+  ``beam_width``, linear in the angle down to 0 at ``cutoff_angle``, 0 beyond;
+* directional: E, constant;
+* area lights: L cos(theta_l) / r^2 / pdf_area (a rectangle or triangle sampled
+  uniformly by area), or L / pdf_solid_angle (a sphere sampled uniformly in
+  the cone of directions it subtends), the two estimators of
+  integral L cos(theta_l) / r^2 dA = integral L d(omega) over the light.
+"""
+
+import math
+
+import drjit as dr
+
+
+def inverse_square(intensity, dist):
+    """Irradiance-like factor I / r^2 of a point source at distance r (W/sr / m^2)."""
+    return intensity / (dist * dist)
+
+
+def point(p, position, intensity):
+    """(wi, dist, I / r^2) for a point light."""
+    to_light = position - p
+    dist = dr.norm(to_light)
+    return to_light / dist, dist, inverse_square(intensity, dist)
+
+
+def spot_falloff(cos_theta, cutoff_deg: float, beam_deg: float):
+    """Mitsuba's spot profile for the angle theta between the spot axis and a direction."""
+    cutoff = math.radians(cutoff_deg)
+    beam = math.radians(beam_deg)
+    inside = cos_theta >= math.cos(beam)
+    if cutoff > beam:
+        ramp = (cutoff - dr.acos(dr.clip(cos_theta, -1, 1))) / (cutoff - beam)
+    else:
+        ramp = dr.zeros(type(cos_theta), dr.width(cos_theta))
+    value = dr.select(inside, 1.0, ramp)
+    return dr.select(cos_theta > math.cos(cutoff), value, 0.0)
+
+
+def spot(p, position, axis, intensity, cutoff_deg: float, beam_deg: float):
+    """(wi, dist, I falloff / r^2) for a spot light pointing along the unit ``axis``."""
+    wi, dist, e = point(p, position, intensity)
+    falloff = spot_falloff(dr.dot(-wi, axis), cutoff_deg, beam_deg)
+    return wi, dist, e * falloff
+
+
+def directional(p, direction, irradiance):
+    """(wi, inf, E): light travelling along the unit ``direction``."""
+    wi = -direction + dr.zeros(type(p), dr.width(p))
+    return wi, dr.full(type(p.x), dr.inf, dr.width(p)), irradiance
+
+
+def lambert_cosine(n, wi):
+    """Lambert's cosine law with clamping: max(n . wi, 0) for unit vectors."""
+    return dr.maximum(dr.dot(n, wi), 0)
+
+
+# --------------------------------------------------------------------------------------
+# Area lights: sampling and the conversion between area and solid-angle measure
+# --------------------------------------------------------------------------------------
+
+
+def area_to_solid_angle_pdf(pdf_area, dist, cos_light):
+    """pdf w.r.t. solid angle from pdf w.r.t. area: pdf_A r^2 / |cos theta_l|."""
+    return pdf_area * dist * dist / dr.abs(cos_light)
+
+
+def sample_parallelogram(sample, center, u, v):
+    """Uniform point on the parallelogram center + a u + b v, (a, b) in [-1, 1]^2."""
+    return center + (2 * sample.x - 1) * u + (2 * sample.y - 1) * v
+
+
+def sample_triangle(sample, p0, e1, e2):
+    """Uniform point on a triangle by the square-root warp (Shirley's, "Realistic Ray Tracing").
+
+    beta = 1 - sqrt(u1), gamma = u2 sqrt(u1) is uniform in area over the triangle.
+    """
+    su = dr.sqrt(sample.x)
+    return p0 + (1 - su) * e1 + (sample.y * su) * e2
+
+
+def sample_cone(sample, cos_max):
+    """Local direction uniform in the cone around +z with cos(theta) >= cos_max, and its pdf."""
+    cos_t = (1 - sample.x) + sample.x * cos_max
+    sin_t = dr.sqrt(dr.maximum(1 - cos_t * cos_t, 0))
+    phi = 2 * math.pi * sample.y
+    s, c = dr.sincos(phi)
+    pdf = 1 / (2 * math.pi * (1 - cos_max))
+    return c * sin_t, s * sin_t, cos_t, pdf
+
+
+def coordinate_system(n):
+    """Two unit tangents completing the unit vector ``n`` to an orthonormal frame.
+
+    Duff et al., "Building an Orthonormal Basis, Revisited" (JCGT 6(1), 2017).
+    """
+    sign = dr.copysign(1.0, n.z)
+    a = -1 / (sign + n.z)
+    b = n.x * n.y * a
+    t = type(n)(1 + sign * n.x * n.x * a, sign * b, -sign * n.x)
+    s = type(n)(b, sign + n.y * n.y * a, -n.y)
+    return t, s

@@ -1,0 +1,264 @@
+"""Find a libLLVM that Dr.Jit 1.5's LLVM backend can use, before Dr.Jit loads.
+
+Dr.Jit reads ``DRJIT_LIBLLVM_PATH`` once, when it is first imported, and
+otherwise loads whatever ``libLLVM.so`` the system offers. With drjit 1.5.0,
+LLVM 14 is refused and LLVM 15 and 16 abort the whole process inside
+``dr.minimum`` ("LLVM ERROR: Cannot select ... fminimum"); 19 and 23 work.
+Debian 12 ships 14 and 15, so the default choice is fatal there. This module
+picks a library that works and sets the variable, or explains in one line
+what to install. It must not import drjit itself.
+
+Order of preference:
+
+1. ``DRJIT_LIBLLVM_PATH`` set by the user (checked, never silently replaced);
+2. the copy that the ``karellen-llvm-core`` wheel installs into the
+   environment (a declared dependency on Linux);
+3. a system library (``/usr/lib/llvm-*/lib``, ``/usr/lib/<triplet>``, ...)
+   of a version known to work, newest first.
+
+``WHITTED_LLVM_SEARCH`` (directories separated by ``os.pathsep``) replaces
+steps 2 and 3 with a search of those directories only; packagers and the
+tests use it.
+"""
+
+from __future__ import annotations
+
+import glob
+import json
+import os
+import re
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+
+#: Majors measured to work with drjit 1.5.0.
+KNOWN_GOOD_FROM = 19
+#: Majors measured to fail: 14 is refused, 15 and 16 abort in ``dr.minimum``.
+KNOWN_BAD = {14: "is refused by drjit 1.5 (too old)",
+             15: "aborts drjit 1.5 inside dr.minimum",
+             16: "aborts drjit 1.5 inside dr.minimum"}
+
+INSTALL_HINT = ("pip install karellen-llvm-core  (or on Debian/Ubuntu: "
+                "apt-get install libllvm19)")
+
+_SYSTEM_GLOBS = (
+    "/usr/lib/llvm-*/lib/libLLVM*.so*",
+    "/usr/lib/*-linux-gnu/libLLVM*.so*",
+    "/usr/lib64/libLLVM*.so*",
+    "/usr/lib/libLLVM*.so*",
+    "/usr/local/lib/libLLVM*.so*",
+    "/opt/homebrew/opt/llvm/lib/libLLVM*.dylib",
+    "/usr/local/opt/llvm/lib/libLLVM*.dylib",
+)
+
+
+class LLVMUnavailable(RuntimeError):
+    """No libLLVM that works with drjit 1.5 was found; the message is one line."""
+
+
+@dataclass(frozen=True)
+class Candidate:
+    path: str
+    major: int | None  # None: the version could not be read from the name
+    source: str        # "DRJIT_LIBLLVM_PATH", "karellen-llvm-core", "system", ...
+
+
+def llvm_major(path: str) -> int | None:
+    """The LLVM major version encoded in a library's file name, or None.
+
+    Reads names such as ``libLLVM-15.so.1``, ``libLLVM.so.23.1``,
+    ``libLLVM-19.so`` or ``libLLVM.so.19.1``; symbolic links are followed
+    first, so an unversioned ``libLLVM.so`` resolves to its target.
+
+    >>> llvm_major("/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1")
+    15
+    >>> llvm_major("/env/lib/libLLVM.so.23.1")
+    23
+    """
+    names = [os.path.basename(path)]
+    try:
+        names.append(os.path.basename(os.path.realpath(path)))
+    except OSError:
+        pass
+    for name in names:
+        m = re.match(r"libLLVM-(\d+)", name) or re.match(r"libLLVM\.so\.(\d+)", name) \
+            or re.match(r"libLLVM\.(\d+)(?:\.\d+)*\.dylib", name)
+        if m:
+            return int(m.group(1))
+    m = re.search(r"llvm-(\d+)", os.path.realpath(path))
+    return int(m.group(1)) if m else None
+
+
+def _package_candidates() -> list[Candidate]:
+    """libLLVM files installed by the karellen-llvm-core wheel, if it is present."""
+    try:
+        from importlib import metadata
+        dist = metadata.distribution("karellen-llvm-core")
+    except Exception:
+        return []
+    found = []
+    for f in dist.files or ():
+        name = os.path.basename(str(f))
+        if re.match(r"libLLVM(-\d+)?\.(so|dylib)", name):
+            p = str(dist.locate_file(f))
+            if os.path.isfile(p):
+                found.append(Candidate(p, llvm_major(p), "karellen-llvm-core"))
+    # Prefer the fully versioned file name: it is the real library, not a link.
+    found.sort(key=lambda c: -len(os.path.basename(c.path)))
+    return found
+
+
+def _dir_candidates(dirs: list[str], source: str) -> list[Candidate]:
+    found = []
+    for d in dirs:
+        for p in sorted(glob.glob(os.path.join(d, "libLLVM*.so*")) +
+                        glob.glob(os.path.join(d, "libLLVM*.dylib"))):
+            if os.path.isfile(p):
+                found.append(Candidate(p, llvm_major(p), source))
+    return found
+
+
+def _system_candidates() -> list[Candidate]:
+    paths = []
+    for pattern in _SYSTEM_GLOBS:
+        paths += glob.glob(pattern)
+    seen, found = set(), []
+    for p in sorted(paths):
+        real = os.path.realpath(p)
+        if real in seen or not os.path.isfile(real):
+            continue
+        seen.add(real)
+        found.append(Candidate(p, llvm_major(p), "system"))
+    return found
+
+
+def _probe(path: str) -> bool:
+    """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child."""
+    cache = _probe_cache_file()
+    key = f"{os.path.realpath(path)}:{_mtime(path)}"
+    results = {}
+    try:
+        results = json.loads(cache.read_text())
+        if key in results:
+            return bool(results[key])
+    except (OSError, ValueError):
+        pass
+    code = ("import drjit as dr, drjit.llvm as m\n"
+            "assert dr.has_backend(dr.JitBackend.LLVM)\n"
+            "x = m.Float([1, 2, 3])\n"
+            "y = dr.minimum(x, 2.0) + dr.maximum(x, 2.0)\n"
+            "assert y.numpy().tolist() == [3, 4, 5]\n")
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=path)
+    try:
+        r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           timeout=120)
+        ok = r.returncode == 0
+    except (OSError, subprocess.TimeoutExpired):
+        ok = False
+    try:
+        results[key] = ok
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        cache.write_text(json.dumps(results))
+    except OSError:
+        pass
+    return ok
+
+
+def _mtime(path: str) -> int:
+    try:
+        return int(os.stat(path).st_mtime)
+    except OSError:
+        return 0
+
+
+def _probe_cache_file() -> Path:
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "whitted" / "llvm-probe.json"
+
+
+def _usable(c: Candidate) -> bool:
+    if c.major is not None and c.major in KNOWN_BAD:
+        return False
+    if c.major is not None and c.major < 14:
+        return False
+    if c.major is not None and c.major >= KNOWN_GOOD_FROM:
+        return True
+    return _probe(c.path)  # 17, 18, or a name without a version: try it
+
+
+def _describe(c: Candidate) -> str:
+    return f"LLVM {c.major}" if c.major is not None else os.path.basename(c.path)
+
+
+def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
+    """Choose the libLLVM for Dr.Jit; raise :class:`LLVMUnavailable` if none works."""
+    env = os.environ if env is None else env
+    explicit = env.get("DRJIT_LIBLLVM_PATH")
+    if explicit:
+        c = Candidate(explicit, llvm_major(explicit), "DRJIT_LIBLLVM_PATH")
+        if not os.path.isfile(explicit):
+            raise LLVMUnavailable(
+                f"DRJIT_LIBLLVM_PATH={explicit} does not exist; unset it or point it to "
+                f"libLLVM {KNOWN_GOOD_FROM} or newer ({INSTALL_HINT})")
+        if c.major in KNOWN_BAD:
+            raise LLVMUnavailable(
+                f"DRJIT_LIBLLVM_PATH={explicit} is LLVM {c.major}, which "
+                f"{KNOWN_BAD[c.major]}; unset it or point it to libLLVM {KNOWN_GOOD_FROM} "
+                f"or newer ({INSTALL_HINT})")
+        if not _usable(c):
+            raise LLVMUnavailable(
+                f"DRJIT_LIBLLVM_PATH={explicit} does not work with drjit 1.5; unset it or "
+                f"point it to libLLVM {KNOWN_GOOD_FROM} or newer ({INSTALL_HINT})")
+        return c
+
+    search = env.get("WHITTED_LLVM_SEARCH")
+    if search is not None:
+        candidates = _dir_candidates([d for d in search.split(os.pathsep) if d],
+                                     "WHITTED_LLVM_SEARCH")
+    else:
+        candidates = _package_candidates() + _system_candidates()
+    ranked = sorted(candidates, key=lambda c: (c.source != "karellen-llvm-core",
+                                               -(c.major or 0)))
+    for c in ranked:
+        if _usable(c):
+            return c
+    seen = sorted({_describe(c) for c in candidates})
+    found = f"found only {', '.join(seen)}" if seen else "found none"
+    raise LLVMUnavailable(
+        f"no libLLVM that works with drjit 1.5 ({found}; need {KNOWN_GOOD_FROM} or newer): "
+        f"{INSTALL_HINT}")
+
+
+_chosen: Candidate | None = None
+_error: LLVMUnavailable | None = None
+
+
+def configure() -> Candidate | None:
+    """Find a libLLVM once per process and export it as ``DRJIT_LIBLLVM_PATH``.
+
+    Returns the choice, or None when no usable library exists (the reason is
+    kept for :func:`require`). Does nothing useful once drjit is imported,
+    because Dr.Jit has read the variable by then.
+    """
+    global _chosen, _error
+    if _chosen is not None or _error is not None:
+        return _chosen
+    try:
+        _chosen = find_libllvm()
+        os.environ["DRJIT_LIBLLVM_PATH"] = _chosen.path
+    except LLVMUnavailable as e:
+        _error = e
+        # Keep Dr.Jit from loading a library that would abort the process: an
+        # empty search leaves the LLVM backend off instead.
+        os.environ["DRJIT_LIBLLVM_PATH"] = os.devnull
+    return _chosen
+
+
+def require() -> Candidate:
+    """The configured libLLVM, or :class:`LLVMUnavailable` with its one-line reason."""
+    configure()
+    if _chosen is None:
+        assert _error is not None
+        raise _error
+    return _chosen

@@ -1,0 +1,69 @@
+"""Sample positions and the random numbers of the tracer.
+
+Pixel samples: ``spp = n^2`` samples per pixel on an n x n grid of strata, at
+the strata centres (x + (i + 1/2)/n, y + (j + 1/2)/n): the positions of
+Mitsuba's ``stratified`` sampler with ``jitter = false``. The tracer itself
+is deterministic wherever it does not sample area lights.
+
+Random numbers (area-light sampling only) come from a stateless hash of
+(sample index, dimension), so every sample and every dimension draws
+independent numbers without carried state: the PCG hash of Jarzynski and
+Olano, "Hash Functions for GPU Rendering", JCGT 9(3), 2020.
+"""
+
+import drjit as dr
+
+from tracer.backend import jit
+
+
+def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
+    """(global pixel index, sample index within the pixel, film x, film y) for a range of pixels.
+
+    Samples are ordered pixel by pixel, ``n * n`` consecutive samples per pixel,
+    so a per-pixel mean is a block reduction.
+    """
+    spp = n * n
+    idx = dr.arange(jit.UInt32, pixel_count * spp)
+    local_pixel = idx // spp
+    s = idx - local_pixel * spp
+    pixel = local_pixel + dr.opaque(jit.UInt32, first_pixel)
+    px = pixel % width
+    py = pixel // width
+    sy = s // n
+    sx = s - sy * n
+    inv = 1.0 / n
+    film_x = jit.Float(px) + (jit.Float(sx) + 0.5) * inv
+    film_y = jit.Float(py) + (jit.Float(sy) + 0.5) * inv
+    return pixel, s, film_x, film_y
+
+
+def pcg_hash(v):
+    """32-bit PCG output permutation of a 32-bit input (Jarzynski & Olano 2020)."""
+    state = v * 747796405 + 2891336453
+    word = ((state >> ((state >> 28) + 4)) ^ state) * 277803737
+    return (word >> 22) ^ word
+
+
+def uniform(key):
+    """A float in [0, 1) from a 32-bit hash value (its top 24 bits)."""
+    return jit.Float(key >> 8) * (1.0 / (1 << 24))
+
+
+def stratified_2d(pixel, s, n: int, dimension: int):
+    """A 2D point in [0, 1)^2, stratified over the n*n samples of each pixel.
+
+    Sample ``s`` of a pixel takes stratum (s + k) mod n^2, with k a random
+    offset per (pixel, dimension), and a uniform position inside it: each point
+    is uniformly distributed, and the points of one pixel cover every stratum
+    once, which lowers the variance of area-light estimates.
+    """
+    spp = n * n
+    dim = pcg_hash(jit.UInt32(dimension) * 0x9E3779B9 + 0x7F4A7C15)
+    key = pcg_hash(pixel ^ dim)
+    stratum = (s + key % spp) % spp
+    cy = stratum // n
+    cx = stratum - cy * n
+    h1 = pcg_hash(key ^ (s * 0x85EBCA6B + 0x68E31DA4))
+    h2 = pcg_hash(h1 + 0x632BE5AB)
+    inv = 1.0 / n
+    return jit.Array2f((jit.Float(cx) + uniform(h1)) * inv, (jit.Float(cy) + uniform(h2)) * inv)

@@ -1,0 +1,547 @@
+"""The scene model: TOML files validated into immutable dataclasses.
+
+The format and its radiometric conventions are the public contract written in
+``README.md`` (section "Scene format"), which follows Mitsuba 3's conventions
+so that the same file means the same picture to the tracer and to the
+reference. Any input the contract calls bad is refused by :func:`load_scene`
+with a :class:`~tracer.errors.SceneError` naming the file, the key and what was
+expected, before anything renders.
+
+Two lines load and render a scene::
+
+    >>> from tracer import load_scene, render            # doctest: +SKIP
+    >>> image = render(load_scene("scenes/sphere_point.toml"))  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from tracer import transform as tf
+from tracer.errors import SceneError
+
+Vec3 = tuple[float, float, float]
+Color = tuple[float, float, float]
+Matrix = tuple[tuple[float, ...], ...]
+
+# ---------------------------------------------------------------------------
+# The model
+# ---------------------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Film:
+    width: int = 320
+    height: int = 240
+    spp: int = 16
+    max_depth: int = 6
+
+    @property
+    def strata(self) -> int:
+        """Strata per pixel side: spp is rounded up to a square, as Mitsuba's sampler does."""
+        n = math.isqrt(self.spp)
+        return n if n * n == self.spp else n + 1
+
+
+@dataclass(frozen=True)
+class Camera:
+    type: str  # "perspective" | "orthographic"
+    origin: Vec3
+    target: Vec3
+    up: Vec3 = (0.0, 1.0, 0.0)
+    fov: float = 45.0           # perspective: horizontal field of view, degrees
+    width: float = 2.0          # orthographic: world-space width of the view
+    near_clip: float = 1e-2     # Mitsuba's defaults, so both sides clip alike
+    far_clip: float = 1e4
+
+    def to_world(self) -> np.ndarray:
+        return tf.look_at(self.origin, self.target, self.up)
+
+
+@dataclass(frozen=True)
+class Diffuse:
+    name: str
+    reflectance: Color = (0.5, 0.5, 0.5)
+
+
+@dataclass(frozen=True)
+class Mirror:
+    name: str
+    reflectance: Color = (1.0, 1.0, 1.0)
+
+
+@dataclass(frozen=True)
+class Dielectric:
+    name: str
+    ior: float = 1.5
+    ext_ior: float = 1.0
+    fresnel: str = "exact"  # or "schlick" (tracer only; Mitsuba is always exact)
+
+    @property
+    def eta(self) -> float:
+        return self.ior / self.ext_ior
+
+
+Material = Diffuse | Mirror | Dielectric
+
+
+@dataclass(frozen=True)
+class PointLight:
+    position: Vec3
+    intensity: Color  # W/sr
+
+
+@dataclass(frozen=True)
+class DirectionalLight:
+    direction: Vec3   # unit vector, the direction the light travels
+    irradiance: Color  # W/m^2, measured normal to the direction
+
+
+@dataclass(frozen=True)
+class SpotLight:
+    position: Vec3
+    target: Vec3
+    intensity: Color  # W/sr on the axis
+    cutoff_angle: float = 20.0
+    beam_width: float = 15.0
+
+    @property
+    def axis(self) -> Vec3:
+        d = np.subtract(self.target, self.position)
+        return tuple(float(x) for x in d / np.linalg.norm(d))
+
+
+Light = PointLight | DirectionalLight | SpotLight
+
+
+@dataclass(frozen=True)
+class AreaEmitter:
+    radiance: Color  # W/(m^2 sr), emitted from the front side
+
+
+@dataclass(frozen=True)
+class Sphere:
+    center: Vec3
+    radius: float
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+
+@dataclass(frozen=True)
+class Rectangle:
+    """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
+    to_world: Matrix
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre and the two half-edge vectors (images of local +x and +y) in world space."""
+        m = np.asarray(self.to_world)
+        c = tf.apply_point(m, (0, 0, 0))
+        return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
+
+    def normal(self) -> np.ndarray:
+        n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
+        return n / np.linalg.norm(n)
+
+
+@dataclass(frozen=True)
+class Triangle:
+    vertices: tuple[Vec3, Vec3, Vec3]  # world space, after to_world
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+
+Shape = Sphere | Rectangle | Triangle
+
+
+@dataclass(frozen=True)
+class Scene:
+    path: str
+    film: Film
+    camera: Camera
+    materials: dict[str, Material]
+    lights: tuple[Light, ...]
+    shapes: tuple[Shape, ...]
+    description: str = ""
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def name(self) -> str:
+        return Path(self.path).stem
+
+    def with_overrides(self, spp: int | None = None, max_depth: int | None = None,
+                       size: tuple[int, int] | None = None) -> Scene:
+        """The same scene with film settings replaced (the command line's options)."""
+        film = self.film
+        if spp is not None:
+            film = replace(film, spp=spp)
+        if max_depth is not None:
+            film = replace(film, max_depth=max_depth)
+        if size is not None:
+            film = replace(film, width=size[0], height=size[1])
+        return replace(self, film=film)
+
+    def material_of(self, shape: Shape) -> Material | None:
+        return None if shape.material is None else self.materials[shape.material]
+
+    def has_specular(self) -> bool:
+        used = {s.material for s in self.shapes}
+        return any(isinstance(self.materials[m], (Mirror, Dielectric))
+                   for m in used if m is not None)
+
+    def has_area_lights(self) -> bool:
+        return any(s.emitter is not None for s in self.shapes)
+
+
+# ---------------------------------------------------------------------------
+# Validation
+# ---------------------------------------------------------------------------
+
+
+class _Table:
+    """A TOML table being read: remembers its key path and which keys were used."""
+
+    def __init__(self, path: str, key: str, data: Any, what: str = "a table"):
+        self.path, self.key = path, key
+        if not isinstance(data, dict):
+            self.fail("", f"expected {what}, got {_show(data)}")
+        self.data = data
+        self.used: set[str] = set()
+
+    def _k(self, key: str) -> str:
+        return f"{self.key}.{key}" if self.key and key else (self.key or key)
+
+    def fail(self, key: str, message: str):
+        raise SceneError(self.path, self._k(key), message)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str, default: Any = ..., required_what: str = "a value") -> Any:
+        self.used.add(key)
+        if key not in self.data:
+            if default is ...:
+                self.fail(key, f"missing; expected {required_what}")
+            return default
+        return self.data[key]
+
+    def number(self, key: str, default: Any = ..., lo: float | None = None,
+               hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> float:
+        what = _range_text("a number", lo, hi, lo_open, hi_open)
+        v = self.raw(key, default, what)
+        return _check_number(self, key, v, what, lo, hi, lo_open, hi_open)
+
+    def integer(self, key: str, default: Any = ..., lo: int | None = None) -> int:
+        what = "an integer" + (f" >= {lo}" if lo is not None else "")
+        v = self.raw(key, default, what)
+        if isinstance(v, bool) or not isinstance(v, int):
+            self.fail(key, f"expected {what}, got {_show(v)}")
+        if lo is not None and v < lo:
+            self.fail(key, f"expected {what}, got {v}")
+        return v
+
+    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
+        what = "a string" if not choices else "one of: " + ", ".join(f'"{c}"' for c in choices)
+        v = self.raw(key, default, what)
+        if not isinstance(v, str) or (choices and v not in choices):
+            self.fail(key, f"expected {what}, got {_show(v)}")
+        return v
+
+    def vec3(self, key: str, default: Any = ..., nonzero: bool = False) -> Vec3:
+        v = self.raw(key, default, "a list of 3 numbers")
+        return _vec3(self, key, v, nonzero)
+
+    def color(self, key: str, default: Any = ..., hi: float | None = None) -> Color:
+        what = "a colour: one number or a list of 3 numbers, each >= 0" + (
+            f" and <= {hi}" if hi is not None else "")
+        v = self.raw(key, default, what)
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            v = [v, v, v]
+        if not isinstance(v, list) or len(v) != 3:
+            self.fail(key, f"expected {what}, got {_show(v)}")
+        out = []
+        for i, x in enumerate(v):
+            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+                self.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
+            if x < 0 or (hi is not None and x > hi):
+                self.fail(key, f"expected {what}, got {_show(v)}")
+            out.append(float(x))
+        return (out[0], out[1], out[2])
+
+    def table(self, key: str, default: Any = ...) -> _Table:
+        v = self.raw(key, default, "a table")
+        return _Table(self.path, self._k(key), v)
+
+    def finish(self, allowed_note: str = ""):
+        """Refuse keys that were never read: a typo must not be silently ignored."""
+        unknown = [k for k in self.data if k not in self.used]
+        if unknown:
+            known = ", ".join(sorted(self.used))
+            self.fail(unknown[0], f"unknown key (expected one of: {known}){allowed_note}")
+
+
+def _show(v: Any) -> str:
+    if isinstance(v, float) and math.isnan(v):
+        return "nan"
+    if isinstance(v, str):
+        return f'"{v}"'
+    if isinstance(v, dict):
+        return "a table"
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    return repr(v)
+
+
+def _range_text(base: str, lo, hi, lo_open, hi_open) -> str:
+    parts = []
+    if lo is not None:
+        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
+    if hi is not None:
+        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
+    return base + (" " + " and ".join(parts) if parts else "")
+
+
+def _check_number(t: _Table, key: str, v, what, lo, hi, lo_open, hi_open) -> float:
+    if isinstance(v, bool) or not isinstance(v, (int, float)):
+        t.fail(key, f"expected {what}, got {_show(v)}")
+    if not math.isfinite(v):
+        t.fail(key, f"expected a finite number ({what}), got {_show(v)}")
+    if lo is not None and (v <= lo if lo_open else v < lo):
+        t.fail(key, f"expected {what}, got {v:g}")
+    if hi is not None and (v >= hi if hi_open else v > hi):
+        t.fail(key, f"expected {what}, got {v:g}")
+    return float(v)
+
+
+def _vec3(t: _Table, key: str, v, nonzero: bool = False) -> Vec3:
+    what = "a list of 3 finite numbers"
+    if not isinstance(v, list) or len(v) != 3:
+        got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
+        t.fail(key, f"expected {what}, got {got}")
+    for i, x in enumerate(v):
+        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+            t.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
+    out = (float(v[0]), float(v[1]), float(v[2]))
+    if nonzero and not any(out):
+        t.fail(key, "expected a non-zero vector, got [0, 0, 0]")
+    return out
+
+
+SHAPE_TYPES = ("sphere", "rectangle", "triangle")
+MATERIAL_TYPES = ("diffuse", "mirror", "dielectric")
+LIGHT_TYPES = ("point", "directional", "spot")
+CAMERA_TYPES = ("perspective", "orthographic")
+TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes")
+
+
+def load_scene(path: str | Path) -> Scene:
+    """Read and validate a TOML scene; raise :class:`SceneError` on bad input."""
+    path = str(path)
+    try:
+        text = Path(path).read_bytes().decode("utf-8")
+    except FileNotFoundError:
+        raise SceneError(path, "", "no such scene file") from None
+    except IsADirectoryError:
+        raise SceneError(path, "", "is a directory, expected a .toml scene file") from None
+    except UnicodeDecodeError as e:
+        raise SceneError(path, "", f"not UTF-8 text ({e.reason})") from None
+    except OSError as e:
+        raise SceneError(path, "", f"cannot read: {e.strerror}") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SceneError(path, "", f"not valid TOML: {e}") from None
+    return parse_scene(data, path)
+
+
+def parse_scene(data: dict, path: str = "<scene>") -> Scene:
+    """Validate an already parsed TOML document (see :func:`load_scene`)."""
+    top = _Table(path, "", data)
+    description = top.string("description", "")
+    film = _parse_film(top.table("film", {}))
+    camera = _parse_camera(top.table("camera"))
+
+    mats_t = top.table("materials", {})
+    materials: dict[str, Material] = {}
+    for name in list(mats_t.data):
+        materials[name] = _parse_material(mats_t.table(name), name)
+    mats_t.finish()
+
+    lights = tuple(_parse_light(t) for t in _array_of_tables(top, "lights"))
+    shapes_t = _array_of_tables(top, "shapes")
+    shapes = tuple(_parse_shape(t, materials) for t in shapes_t)
+    top.finish()
+    return Scene(path=path, film=film, camera=camera, materials=materials, lights=lights,
+                 shapes=shapes, description=description)
+
+
+def _array_of_tables(top: _Table, key: str) -> list[_Table]:
+    v = top.raw(key, [])
+    if not isinstance(v, list):
+        top.fail(key, f"expected an array of tables ([[{key}]]), got {_show(v)}")
+    return [_Table(top.path, f"{key}[{i}]", x) for i, x in enumerate(v)]
+
+
+def _parse_film(t: _Table) -> Film:
+    d = Film()
+    film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
+                spp=t.integer("spp", d.spp, lo=1), max_depth=t.integer("max_depth", d.max_depth, lo=1))
+    t.finish()
+    return film
+
+
+def _parse_camera(t: _Table) -> Camera:
+    kind = t.string("type", "perspective", CAMERA_TYPES)
+    origin, target = t.vec3("origin"), t.vec3("target")
+    up = t.vec3("up", [0.0, 1.0, 0.0], nonzero=True)
+    forward = np.subtract(target, origin)
+    if not np.any(forward):
+        t.fail("target", "expected a point different from camera.origin")
+    if np.linalg.norm(np.cross(forward, up)) <= 1e-9 * np.linalg.norm(forward) * np.linalg.norm(up):
+        t.fail("up", "expected a direction not parallel to target - origin")
+    near = t.number("near_clip", 1e-2, lo=0, lo_open=True)
+    far = t.number("far_clip", 1e4, lo=near, lo_open=True)
+    if kind == "perspective":
+        cam = Camera("perspective", origin, target, up,
+                     fov=t.number("fov", 45.0, lo=0, hi=180, lo_open=True, hi_open=True),
+                     near_clip=near, far_clip=far)
+        note = " (width is for orthographic cameras)" if t.has("width") else ""
+    else:
+        cam = Camera("orthographic", origin, target, up,
+                     width=t.number("width", lo=0, lo_open=True), near_clip=near, far_clip=far)
+        note = " (fov is for perspective cameras)" if t.has("fov") else ""
+    t.finish(note)
+    return cam
+
+
+def _parse_material(t: _Table, name: str) -> Material:
+    kind = t.string("type", choices=MATERIAL_TYPES)
+    if kind == "diffuse":
+        m = Diffuse(name, t.color("reflectance", 0.5, hi=1.0))
+    elif kind == "mirror":
+        m = Mirror(name, t.color("reflectance", 1.0, hi=1.0))
+    else:
+        m = Dielectric(name, ior=t.number("ior", 1.5, lo=0, lo_open=True),
+                       ext_ior=t.number("ext_ior", 1.0, lo=0, lo_open=True),
+                       fresnel=t.string("fresnel", "exact", ("exact", "schlick")))
+    t.finish()
+    return m
+
+
+def _parse_light(t: _Table) -> Light:
+    kind = t.string("type", choices=LIGHT_TYPES)
+    if kind == "point":
+        light = PointLight(t.vec3("position"), t.color("intensity"))
+    elif kind == "directional":
+        d = np.asarray(t.vec3("direction", nonzero=True))
+        light = DirectionalLight(tuple(float(x) for x in d / np.linalg.norm(d)),
+                                 t.color("irradiance"))
+    else:
+        position, target = t.vec3("position"), t.vec3("target")
+        if position == target:
+            t.fail("target", "expected a point different from position")
+        cutoff = t.number("cutoff_angle", 20.0, lo=0, hi=180, lo_open=True, hi_open=True)
+        beam = t.number("beam_width", 0.75 * cutoff, lo=0, hi=cutoff)
+        light = SpotLight(position, target, t.color("intensity"), cutoff, beam)
+    t.finish()
+    return light
+
+
+def _parse_steps(t: _Table, key: str) -> np.ndarray:
+    steps = t.raw(key, [])
+    if not isinstance(steps, list):
+        t.fail(key, f"expected a list of steps like [{{ translate = [x, y, z] }}], got {_show(steps)}")
+    mats = []
+    for i, step in enumerate(steps):
+        s = _Table(t.path, f"{t._k(key)}[{i}]", step,
+                   "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
+                   "{ matrix = [[..] x4] }")
+        if len(step) != 1:
+            s.fail("", f"expected exactly one of translate, scale, rotate, matrix in a step, "
+                       f"got {', '.join(step) or 'none'}")
+        op = next(iter(step))
+        if op == "translate":
+            mats.append(tf.translate(s.vec3("translate")))
+        elif op == "scale":
+            v = s.raw("scale")
+            if isinstance(v, (int, float)) and not isinstance(v, bool):
+                v = [v, v, v]
+            sv = _vec3(s, "scale", v)
+            if any(x == 0 for x in sv):
+                s.fail("scale", f"expected non-zero scale factors, got {_show(list(sv))}")
+            mats.append(tf.scale(sv))
+        elif op == "rotate":
+            r = s.table("rotate")
+            axis = r.vec3("axis", nonzero=True)
+            mats.append(tf.rotate(axis, r.number("angle")))
+            r.finish()
+        elif op == "matrix":
+            v = s.raw("matrix")
+            if (not isinstance(v, list) or len(v) != 4 or
+                    any(not isinstance(row, list) or len(row) != 4 for row in v)):
+                s.fail("matrix", "expected 4 rows of 4 numbers")
+            flat = [x for row in v for x in row]
+            if any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+                   for x in flat):
+                s.fail("matrix", "expected 4 rows of 4 finite numbers")
+            m = np.asarray(v, dtype=np.float64)
+            if not np.allclose(m[3], [0, 0, 0, 1]):
+                s.fail("matrix", "expected an affine matrix (last row [0, 0, 0, 1])")
+            mats.append(m)
+        else:
+            s.fail(op, "unknown step (expected one of: translate, scale, rotate, matrix)")
+        s.finish()
+    m = tf.compose(mats)
+    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
+        t.fail(key, "expected an invertible transform (its determinant is 0)")
+    return m
+
+
+def _as_tuple(m: np.ndarray) -> Matrix:
+    return tuple(tuple(float(x) for x in row) for row in m)
+
+
+def _parse_shape(t: _Table, materials: dict[str, Material]) -> Shape:
+    kind = t.string("type", choices=SHAPE_TYPES)
+    emitter = None
+    if t.has("emitter"):
+        e = t.table("emitter")
+        emitter = AreaEmitter(e.color("radiance"))
+        e.finish()
+    if emitter is None or t.has("material"):
+        material = t.string("material")
+        if material not in materials:
+            known = ", ".join(sorted(materials)) or "none"
+            t.fail("material", f'unknown material "{material}" (defined: {known})')
+    else:
+        material = None  # a pure emitter: black, reflects nothing
+    m = _parse_steps(t, "to_world")
+    if kind == "sphere":
+        center = np.asarray(t.vec3("center", [0.0, 0.0, 0.0]))
+        radius = t.number("radius", 1.0, lo=0, lo_open=True)
+        if not tf.is_similarity(m) or np.linalg.det(m[:3, :3]) < 0:
+            t.fail("to_world", "a sphere takes only translations, rotations and uniform "
+                               "positive scales (the result must stay a sphere)")
+        world_center = tf.apply_point(m, center)
+        world_radius = radius * float(np.linalg.norm(m[:3, 0]))
+        shape = Sphere(tuple(float(x) for x in world_center), world_radius, material, emitter)
+    elif kind == "rectangle":
+        shape = Rectangle(_as_tuple(m), material, emitter)
+    else:
+        v = t.raw("vertices", ..., "a list of 3 vertices [[x, y, z], [x, y, z], [x, y, z]]")
+        if not isinstance(v, list) or len(v) != 3:
+            got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
+            t.fail("vertices", f"expected a list of 3 vertices [[x, y, z], ...], got {got}")
+        verts = [tf.apply_point(m, _vec3(t, f"vertices[{i}]", p)) for i, p in enumerate(v)]
+        if np.linalg.norm(np.cross(verts[1] - verts[0], verts[2] - verts[0])) == 0:
+            t.fail("vertices", "expected a triangle with non-zero area (the vertices are collinear)")
+        shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
+    t.finish()
+    return shape
