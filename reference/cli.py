@@ -9,7 +9,6 @@ fails, 2 on bad input (scene, options, output path, missing libLLVM).
 from __future__ import annotations
 
 import argparse
-import json
 import os
 import sys
 import time
@@ -46,7 +45,7 @@ def _positive(text: str) -> int:
 
 
 def resolve_scene(name: str) -> Path:
-    """A scene path, or the name of a built-in scene (``sphere_point`` -> scenes/sphere_point.toml)."""
+    """A scene path, or a built-in scene's name (``sphere_point``: scenes/sphere_point.toml)."""
     p = Path(name)
     if p.exists() or p.suffix == ".toml" or os.sep in name:
         return p
@@ -145,7 +144,8 @@ def format_comparison(c) -> str:
              f"reference integrator {c.integrator}, test {c.test}"]
     lines.append(f"  {'check':<26}{'value':>12}  {'limit':>10}")
     labels = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
-              "mean_rel_diff": "image means differ by", "z_fraction_passed": "z-test pixels passing",
+              "mean_rel_diff": "image means differ by",
+              "z_fraction_passed": "z-test pixels passing",
               "block_median_rel": "4x4 blocks: median rel.",
               "block_frac_over_5pct": "4x4 blocks beyond 5 %"}
     for k, ch in c.checks.items():

@@ -74,7 +74,8 @@ def bsdf_tree(material) -> dict:
     raise TypeError(f"no Mitsuba conversion for {type(material).__name__}")
 
 
-def sensor_tree(scene: Scene) -> dict:
+def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
+    """Sensor, film and sampler; ``jitter`` places samples at random inside their strata."""
     cam, film = scene.camera, scene.film
     look = tf.look_at(cam.origin, cam.target, cam.up)
     sensor = {"near_clip": ("float", cam.near_clip), "far_clip": ("float", cam.far_clip)}
@@ -90,7 +91,7 @@ def sensor_tree(scene: Scene) -> dict:
                       "component_format": ("string", "float32"),
                       "sample_border": ("boolean", False)}
     sensor["sampler"] = {"type": "stratified", "sample_count": ("integer", film.strata ** 2),
-                         "jitter": ("boolean", False)}
+                         "jitter": ("boolean", jitter)}
     return sensor
 
 
@@ -144,8 +145,9 @@ def integrator_tree(scene: Scene, integrator: str = "whitted", moments: bool = F
     return t
 
 
-def scene_tree(scene: Scene, integrator: str = "whitted", moments: bool = False) -> dict:
-    tree = {"type": "scene", "sensor": sensor_tree(scene),
+def scene_tree(scene: Scene, integrator: str = "whitted", moments: bool = False,
+               jitter: bool = False) -> dict:
+    tree = {"type": "scene", "sensor": sensor_tree(scene, jitter),
             "integrator": integrator_tree(scene, integrator, moments)}
     for i, light in enumerate(scene.lights):
         tree[f"light_{i}"] = emitter_tree(light)
@@ -192,9 +194,10 @@ def to_dict(tree: dict, mi) -> dict:
     return out
 
 
-def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False):
+def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False,
+         jitter: bool = False):
     """The scene as a Mitsuba ``Scene`` object (the variant must already be set)."""
-    return mi.load_dict(to_dict(scene_tree(scene, integrator, moments), mi))
+    return mi.load_dict(to_dict(scene_tree(scene, integrator, moments, jitter), mi))
 
 
 # ------------------------------------------------------------------ XML

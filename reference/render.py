@@ -25,17 +25,19 @@ class ReferenceResult:
 
 
 def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
-                     moments: bool = False) -> ReferenceResult:
+                     moments: bool = False, jitter: bool = False) -> ReferenceResult:
     """Render ``scene`` on Mitsuba with the given integrator.
 
     ``moments`` (``whitted`` only) also estimates each pixel's variance from the
     per-sample second moment: Var(mean) = (E[x^2] - E[x]^2) / spp. With
     stratified samples this bounds the true variance of the mean from above.
+    ``jitter`` moves samples to random places inside their strata (the default,
+    strata centres, is what the tracer uses).
     """
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown reference integrator {integrator!r}")
     mi = mitsuba()
-    ms = load(scene, mi, integrator, moments and integrator == "whitted")
+    ms = load(scene, mi, integrator, moments and integrator == "whitted", jitter)
     spp = scene.film.strata ** 2
     start = time.perf_counter()
     out = np.asarray(mi.render(ms, seed=seed, spp=spp), dtype=np.float32)

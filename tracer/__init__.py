@@ -28,7 +28,7 @@ __version__ = "0.1.0"
 
 
 def render(scene, progress=None):
-    """Render a :class:`~tracer.scene.Scene` and return a :class:`~tracer.integrator.RenderResult`."""
+    """Render a :class:`~tracer.scene.Scene`; return a :class:`~tracer.integrator.RenderResult`."""
     from tracer.integrator import render as _render
 
     return _render(scene, progress)

@@ -77,8 +77,8 @@ def use(name: str | None = None) -> str:
     else:
         if not dr.has_backend(dr.JitBackend.LLVM):
             raise llvm.LLVMUnavailable(
-                f"Dr.Jit could not start its LLVM backend with {os.environ.get('DRJIT_LIBLLVM_PATH')}"
-                f": {llvm.INSTALL_HINT}")
+                "Dr.Jit could not start its LLVM backend with "
+                f"{os.environ.get('DRJIT_LIBLLVM_PATH')}: {llvm.INSTALL_HINT}")
         import drjit.llvm as module
     _name, _module = requested, module
     return requested

@@ -50,7 +50,10 @@ def fresnel_exact(cos_i, eta):
 
 
 def schlick_r0(eta):
-    """Reflectance at normal incidence, R0 = ((n1 - n2) / (n1 + n2))^2 = ((eta - 1) / (eta + 1))^2."""
+    """Reflectance at normal incidence, R0 = ((n1 - n2) / (n1 + n2))^2 = ((eta - 1) / (eta + 1))^2.
+
+    Symmetric in n1 and n2: the same from either side.
+    """
     return dr.square((eta - 1) / (eta + 1))
 
 

@@ -13,8 +13,13 @@ Order of preference:
 1. ``DRJIT_LIBLLVM_PATH`` set by the user (checked, never silently replaced);
 2. the copy that the ``karellen-llvm-core`` wheel installs into the
    environment (a declared dependency on Linux);
-3. a system library (``/usr/lib/llvm-*/lib``, ``/usr/lib/<triplet>``, ...)
-   of a version known to work, newest first.
+3. a system library (``/usr/lib/llvm-*/lib``, ``/usr/lib/<triplet>``, ...),
+   versions known to work (19 and newer) first, newest first.
+
+Versions known to fail are refused by their file name, without loading them;
+any other candidate is loaded once in a child process before it is chosen
+(and the answer cached in ``~/.cache/whitted``), because a library of a good
+version can still fail to load, and an LLVM abort kills the process.
 
 ``WHITTED_LLVM_SEARCH`` (directories separated by ``os.pathsep``) replaces
 steps 2 and 3 with a search of those directories only; packagers and the
@@ -136,7 +141,9 @@ def _system_candidates() -> list[Candidate]:
 def _probe(path: str) -> bool:
     """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child."""
     cache = _probe_cache_file()
-    key = f"{os.path.realpath(path)}:{_mtime(path)}"
+    # Keyed by the path as given: the same file reached through a link elsewhere
+    # can fail where the original loads (its $ORIGIN-relative dependencies).
+    key = f"{os.path.abspath(path)}:{_mtime(path)}"
     results = {}
     try:
         results = json.loads(cache.read_text())
@@ -177,18 +184,28 @@ def _probe_cache_file() -> Path:
     return Path(base) / "whitted" / "llvm-probe.json"
 
 
-def _usable(c: Candidate) -> bool:
+def _rejection(c: Candidate) -> str | None:
+    """Why ``c`` cannot serve Dr.Jit 1.5, or None when it works.
+
+    Versions known to fail are refused by name, without loading them; every
+    other candidate is loaded once by a child process (the answer is cached),
+    since a library of a good version can still fail to load (a missing
+    dependency such as libc++).
+    """
     if c.major is not None and c.major in KNOWN_BAD:
-        return False
+        return KNOWN_BAD[c.major]
     if c.major is not None and c.major < 14:
-        return False
-    if c.major is not None and c.major >= KNOWN_GOOD_FROM:
-        return True
-    return _probe(c.path)  # 17, 18, or a name without a version: try it
+        return "is too old"
+    if not _probe(c.path):
+        return "does not load in drjit 1.5"
+    return None
 
 
-def _describe(c: Candidate) -> str:
-    return f"LLVM {c.major}" if c.major is not None else os.path.basename(c.path)
+def _describe(c: Candidate, why: str | None = None) -> str:
+    name = f"LLVM {c.major}" if c.major is not None else os.path.basename(c.path)
+    if why and c.major not in KNOWN_BAD:
+        name += f" ({why})"
+    return name
 
 
 def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
@@ -206,7 +223,7 @@ def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
                 f"DRJIT_LIBLLVM_PATH={explicit} is LLVM {c.major}, which "
                 f"{KNOWN_BAD[c.major]}; unset it or point it to libLLVM {KNOWN_GOOD_FROM} "
                 f"or newer ({INSTALL_HINT})")
-        if not _usable(c):
+        if _rejection(c):
             raise LLVMUnavailable(
                 f"DRJIT_LIBLLVM_PATH={explicit} does not work with drjit 1.5; unset it or "
                 f"point it to libLLVM {KNOWN_GOOD_FROM} or newer ({INSTALL_HINT})")
@@ -218,13 +235,17 @@ def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
                                      "WHITTED_LLVM_SEARCH")
     else:
         candidates = _package_candidates() + _system_candidates()
+    # The packaged library first, then the newest; 17 and 18 are untested, so after 19+.
     ranked = sorted(candidates, key=lambda c: (c.source != "karellen-llvm-core",
+                                               (c.major or 0) < KNOWN_GOOD_FROM,
                                                -(c.major or 0)))
+    rejected: dict[str, None] = {}
     for c in ranked:
-        if _usable(c):
+        why = _rejection(c)
+        if why is None:
             return c
-    seen = sorted({_describe(c) for c in candidates})
-    found = f"found only {', '.join(seen)}" if seen else "found none"
+        rejected[_describe(c, why)] = None
+    found = f"found only {', '.join(sorted(rejected))}" if rejected else "found none"
     raise LLVMUnavailable(
         f"no libLLVM that works with drjit 1.5 ({found}; need {KNOWN_GOOD_FROM} or newer): "
         f"{INSTALL_HINT}")

@@ -392,7 +392,8 @@ def _array_of_tables(top: _Table, key: str) -> list[_Table]:
 def _parse_film(t: _Table) -> Film:
     d = Film()
     film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
-                spp=t.integer("spp", d.spp, lo=1), max_depth=t.integer("max_depth", d.max_depth, lo=1))
+                spp=t.integer("spp", d.spp, lo=1),
+                max_depth=t.integer("max_depth", d.max_depth, lo=1))
     t.finish()
     return film
 
@@ -457,7 +458,8 @@ def _parse_light(t: _Table) -> Light:
 def _parse_steps(t: _Table, key: str) -> np.ndarray:
     steps = t.raw(key, [])
     if not isinstance(steps, list):
-        t.fail(key, f"expected a list of steps like [{{ translate = [x, y, z] }}], got {_show(steps)}")
+        t.fail(key, "expected a list of steps like [{ translate = [x, y, z] }], "
+                    f"got {_show(steps)}")
     mats = []
     for i, step in enumerate(steps):
         s = _Table(t.path, f"{t._k(key)}[{i}]", step,
@@ -541,7 +543,8 @@ def _parse_shape(t: _Table, materials: dict[str, Material]) -> Shape:
             t.fail("vertices", f"expected a list of 3 vertices [[x, y, z], ...], got {got}")
         verts = [tf.apply_point(m, _vec3(t, f"vertices[{i}]", p)) for i, p in enumerate(v)]
         if np.linalg.norm(np.cross(verts[1] - verts[0], verts[2] - verts[0])) == 0:
-            t.fail("vertices", "expected a triangle with non-zero area (the vertices are collinear)")
+            t.fail("vertices", "expected a triangle with non-zero area "
+                               "(the vertices are collinear)")
         shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
     t.finish()
     return shape

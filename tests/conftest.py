@@ -1,0 +1,89 @@
+"""Shared fixtures: the backend (``--backend llvm|cuda``), Mitsuba, and running the CLI.
+
+``tracer`` is imported before anything else so that a usable libLLVM is chosen
+before Dr.Jit loads.
+"""
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+import tracer  # noqa: F401  (must precede drjit)
+
+ROOT = Path(__file__).resolve().parent.parent
+SCENES = ROOT / "scenes"
+
+
+def pytest_addoption(parser):
+    parser.addoption("--backend", default=None, choices=("auto", "llvm", "cuda"),
+                     help="Dr.Jit backend for the tests (default: WHITTED_BACKEND or auto)")
+
+
+def pytest_configure(config):
+    b = config.getoption("--backend")
+    if b:
+        os.environ["WHITTED_BACKEND"] = b
+
+
+@pytest.fixture(scope="session")
+def jit():
+    """The array types of the selected backend (drjit.llvm or drjit.cuda)."""
+    from tracer import backend
+
+    backend.use()
+    return backend.jit
+
+
+@pytest.fixture(scope="session")
+def mi():
+    """Mitsuba with the variant of the selected backend and our plugins registered."""
+    from reference import mitsuba
+
+    return mitsuba()
+
+
+def run_cli(*args, env=None, cwd=None, timeout=600):
+    """Run ``whitted`` in a fresh interpreter; return the CompletedProcess."""
+    full_env = dict(os.environ)
+    if env:
+        full_env.update(env)
+    return subprocess.run([sys.executable, "-m", "reference.cli", *map(str, args)],
+                          capture_output=True, text=True, env=full_env, cwd=cwd or ROOT,
+                          timeout=timeout)
+
+
+def write_scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+MINIMAL = """
+[film]
+width = 8
+height = 6
+spp = 1
+max_depth = 2
+
+[camera]
+origin = [0, 0, 5]
+target = [0, 0, 0]
+
+[materials.white]
+type = "diffuse"
+reflectance = 0.5
+
+[[lights]]
+type = "point"
+position = [0, 3, 3]
+intensity = 10
+
+[[shapes]]
+type = "sphere"
+center = [0, 0, 0]
+radius = 1
+material = "white"
+"""

@@ -1,0 +1,134 @@
+"""Finding a libLLVM for Dr.Jit: a user never sees an LLVM abort, only one line of advice.
+
+Each command-line case runs in a subprocess, since a bad libLLVM would abort
+the whole interpreter.
+"""
+
+import glob
+import os
+
+import pytest
+from conftest import MINIMAL, run_cli, write_scene
+
+from tracer import llvm
+
+
+@pytest.mark.parametrize("name,major", [
+    ("/usr/lib/x86_64-linux-gnu/libLLVM-15.so.1", 15),
+    ("/usr/lib/llvm-19/lib/libLLVM-19.so", 19),
+    ("/env/lib/libLLVM.so.23.1", 23),
+    ("/x/libLLVM.so.19.1", 19),
+    ("/opt/homebrew/opt/llvm/lib/libLLVM.21.dylib", 21),
+])
+def test_llvm_major_is_read_from_the_file_name(name, major):
+    assert llvm.llvm_major(name) == major
+
+
+def test_known_bad_versions_are_never_chosen(tmp_path):
+    for v in (14, 15, 16):
+        (tmp_path / f"libLLVM-{v}.so.1").write_bytes(b"\x7fELF not really")
+    with pytest.raises(llvm.LLVMUnavailable) as e:
+        llvm.find_libllvm({"WHITTED_LLVM_SEARCH": str(tmp_path)})
+    msg = str(e.value)
+    assert "found only LLVM 14, LLVM 15, LLVM 16" in msg and "karellen-llvm-core" in msg
+    assert "\n" not in msg
+
+
+def test_a_good_version_is_preferred_to_a_bad_one(tmp_path, monkeypatch):
+    (tmp_path / "libLLVM-15.so.1").write_bytes(b"x")
+    (tmp_path / "libLLVM-19.so.1").write_bytes(b"x")
+    (tmp_path / "libLLVM-18.so.1").write_bytes(b"x")
+    probed = []
+    monkeypatch.setattr(llvm, "_probe", lambda p: probed.append(p) or True)
+    c = llvm.find_libllvm({"WHITTED_LLVM_SEARCH": str(tmp_path)})
+    assert c.major == 19
+    assert not any("libLLVM-15" in p for p in probed)  # a known-bad version is never loaded
+
+
+def test_explicit_path_of_a_bad_version_is_refused_without_loading(tmp_path):
+    fake = tmp_path / "libLLVM-15.so.1"
+    fake.write_bytes(b"x")
+    with pytest.raises(llvm.LLVMUnavailable, match="LLVM 15, which aborts drjit"):
+        llvm.find_libllvm({"DRJIT_LIBLLVM_PATH": str(fake)})
+
+
+def test_the_packaged_libllvm_is_found():
+    c = llvm.find_libllvm({})
+    assert c.major is not None and c.major >= llvm.KNOWN_GOOD_FROM
+
+
+def _assert_one_line_exit_2(r, *words):
+    assert r.returncode == 2, (r.returncode, r.stderr)
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1, r.stderr
+    assert "LLVM ERROR" not in r.stderr and "Traceback" not in r.stderr
+    for w in words:
+        assert w in lines[0], lines[0]
+
+
+def test_cli_without_any_usable_libllvm_says_what_to_install(tmp_path):
+    scene = write_scene(tmp_path, MINIMAL)
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    env = {"WHITTED_LLVM_SEARCH": str(empty), "DRJIT_LIBLLVM_PATH": ""}
+    r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm", env=env)
+    _assert_one_line_exit_2(r, "no libLLVM", "pip install karellen-llvm-core")
+    assert not (tmp_path / "x.exr").exists()
+
+
+def test_cli_with_only_a_known_bad_libllvm_refuses_it(tmp_path):
+    scene = write_scene(tmp_path, MINIMAL)
+    d = tmp_path / "lib"
+    d.mkdir()
+    (d / "libLLVM-15.so.1").write_bytes(b"x")
+    env = {"WHITTED_LLVM_SEARCH": str(d), "DRJIT_LIBLLVM_PATH": ""}
+    r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm", env=env)
+    _assert_one_line_exit_2(r, "found only LLVM 15")
+
+
+SYSTEM_BAD = sorted(p for v in (15, 16) for p in glob.glob(f"/usr/lib/*/libLLVM-{v}.so*")
+                    if os.path.isfile(p))
+
+
+@pytest.mark.skipif(not SYSTEM_BAD, reason="no system libLLVM 15 or 16 on this machine")
+def test_cli_pointed_at_a_real_libllvm_15_does_not_abort(tmp_path):
+    # Loaded by Dr.Jit, this library aborts the process inside dr.minimum.
+    scene = write_scene(tmp_path, MINIMAL)
+    r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm",
+                env={"DRJIT_LIBLLVM_PATH": SYSTEM_BAD[0]})
+    _assert_one_line_exit_2(r, "DRJIT_LIBLLVM_PATH", "aborts drjit")
+
+
+def test_cli_with_an_unreadable_explicit_library_is_refused(tmp_path):
+    scene = write_scene(tmp_path, MINIMAL)
+    junk = tmp_path / "libLLVM.so"
+    junk.write_bytes(b"not a library")
+    r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm",
+                env={"DRJIT_LIBLLVM_PATH": str(junk), "XDG_CACHE_HOME": str(tmp_path)})
+    _assert_one_line_exit_2(r, "does not work with drjit")
+
+
+def test_cli_renders_with_a_good_library_found_by_search(tmp_path):
+    good = llvm.find_libllvm({})
+    scene = write_scene(tmp_path, MINIMAL)
+    r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm",
+                env={"WHITTED_LLVM_SEARCH": os.path.dirname(good.path), "DRJIT_LIBLLVM_PATH": ""})
+    assert r.returncode == 0, r.stderr
+    assert (tmp_path / "x.exr").exists()
+
+
+def test_cli_skips_a_good_version_that_does_not_load(tmp_path):
+    # A link to the packaged libLLVM from another folder loses its $ORIGIN-relative
+    # libc++: the version is fine, the library does not load. Probed, never used.
+    good = llvm.find_libllvm({})
+    d = tmp_path / "lib"
+    d.mkdir()
+    os.symlink(good.path, d / os.path.basename(good.path))
+    if glob.glob(os.path.join(os.path.dirname(good.path), "**", "libc++.so.1"), recursive=True):
+        scene = write_scene(tmp_path, MINIMAL)
+        r = run_cli("render", scene, "-o", tmp_path / "x.exr", "--backend", "llvm",
+                    env={"WHITTED_LLVM_SEARCH": str(d), "DRJIT_LIBLLVM_PATH": "",
+                         "XDG_CACHE_HOME": str(tmp_path / "cache")})
+        _assert_one_line_exit_2(r, "does not load")
+    else:
+        pytest.skip("the packaged libLLVM does not depend on a neighbouring libc++")
