@@ -267,7 +267,6 @@ class Integrator:
         scene, geo, mat = self.scene, self.geo, self.mat
         max_depth = scene.film.max_depth
         hit: Hit = geo.closest_hit(b.o, b.d, b.tmax)
-        dr.eval(hit.t, hit.prim)           # kernel 1: intersection
         valid = hit.valid
         surf = geo.surface(hit, b.o, b.d)
         p, n = surf.p, surf.n
@@ -300,7 +299,7 @@ class Integrator:
                     wi, tmax, e = light.incident(p, p_front, u)
                 cos = lights.lambert_cosine(ns, wi)
                 active = diffuse & (cos > 0) & (dr.max(e) > 0)
-                blocked = geo.occluded(p_front, wi, dr.select(active, tmax, 0))
+                blocked = geo.occluded(p_front, wi, tmax, active)
                 contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                 shadow_masks.append(active)
             if mat.has_specular:
@@ -308,7 +307,7 @@ class Integrator:
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
         if children is None:
-            dr.eval(L, *shadow_masks)      # kernel 2: shading and shadow rays
+            dr.eval(L, *shadow_masks)      # one kernel: intersection, shading, shadow rays
             return None, _count(shadow_masks)
         refl_b, refr_b, keep_r, keep_t = children
         dr.eval(L, *shadow_masks, refl_b.o, refl_b.d, refl_b.weight,
