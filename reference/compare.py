@@ -17,11 +17,15 @@ the image means within 0.1 % (the edge pixels average out).
 
 ``z-test`` (scenes with mirrors, glass or area lights). Mitsuba picks one
 lobe at a dielectric and samples area lights at random, so its image has
-variance. As Mitsuba's own render tests do, each pixel and channel is tested
-with z = |tracer - mitsuba| / sqrt(Var), where Var is the variance of the
-reference's pixel mean, estimated from its per-sample second moment
-(E[x^2] - E[x]^2) / spp, plus the tracer's own variance where it samples area
-lights, plus a float32 floor (sigma = 1e-4 |value|, the same precision argument
+variance. The reference pools ``ZTEST_PASSES`` = 16 renders at the same strata
+with different seeds (1024 samples per pixel at 64 spp): a single 64-sample
+pass misses Fresnel paths rarer than about 1/64 and then reports zero
+variance for the very pixels they light. As Mitsuba's own render tests do,
+each pixel and channel is tested with z = |tracer - mitsuba| / sqrt(Var),
+where Var is the variance of the reference's pixel mean, estimated from its
+per-sample second moment (E[x^2] - E[x]^2) / N over its N pooled samples,
+plus the tracer's own variance where it samples area lights, plus a float32
+floor (sigma = 1e-4 |value|, the same precision argument
 as above, so that pixels without any randomness are compared to float
 precision). Two-sided p-values are compared with the Sidak-corrected level
 alpha_pixel = 1 - (1 - 0.01)^(1 / pixels); the test passes when at least
@@ -234,8 +238,13 @@ class Comparison:
         return d
 
 
+#: Reference passes pooled for the z-test (see reference.render.render_reference).
+ZTEST_PASSES = 16
+
+
 def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "whitted",
-                  progress=None) -> tuple[Comparison, np.ndarray, np.ndarray]:
+                  progress=None, passes: int | None = None
+                  ) -> tuple[Comparison, np.ndarray, np.ndarray]:
     """Render ``scene`` with the tracer and with Mitsuba, compare, and write the outputs.
 
     Returns the comparison and both images. With ``outdir`` the folder gets
@@ -251,7 +260,10 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     # The tracer samples only area lights; elsewhere it is deterministic.
     tracer_random = needs_var and scene.has_area_lights()
     tr = Integrator(scene).render(progress, moments=tracer_random)
-    ref = render_reference(scene, integrator, moments=needs_var and integrator == "whitted")
+    if passes is None:
+        passes = ZTEST_PASSES if needs_var else 1
+    ref = render_reference(scene, integrator, moments=needs_var and integrator == "whitted",
+                           passes=passes)
     tracer_var = tr.variance if tracer_random else None
     metrics = image_metrics(tr.image, ref.image)
     ref_var = ref.variance
@@ -263,7 +275,8 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
         scene=scene.name, test=verdict.test, passed=verdict.passed, metrics=asdict(metrics),
         checks=verdict.checks, reason=verdict.reason,
         seconds={"tracer": tr.seconds, "mitsuba": ref.seconds,
-                 "ratio_mitsuba_over_tracer": ref.seconds / tr.seconds if tr.seconds else None},
+                 "ratio_mitsuba_over_tracer": ref.seconds / tr.seconds if tr.seconds else None,
+                 "mitsuba_all_passes": ref.seconds_total, "reference_passes": ref.passes},
         spp=tr.spp, size=(scene.film.width, scene.film.height), integrator=integrator,
         backend=backend.name())
     if outdir is not None:

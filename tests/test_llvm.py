@@ -132,3 +132,19 @@ def test_cli_skips_a_good_version_that_does_not_load(tmp_path):
         _assert_one_line_exit_2(r, "does not load")
     else:
         pytest.skip("the packaged libLLVM does not depend on a neighbouring libc++")
+
+
+@pytest.mark.skipif(not SYSTEM_BAD, reason="no system libLLVM 15 or 16 on this machine")
+def test_drjit_imported_first_with_a_bad_library_is_refused_not_aborted(tmp_path):
+    # A program that imports drjit before tracer gets whatever libLLVM the system
+    # offers; the backend must refuse it with advice instead of aborting later.
+    import subprocess
+    import sys
+
+    code = ("import drjit\nimport tracer\nfrom tracer import backend, llvm\n"
+            "try:\n    backend.use('llvm')\nexcept llvm.LLVMUnavailable as e:\n"
+            "    print(e)\n    raise SystemExit(3)\n")
+    env = dict(os.environ, DRJIT_LIBLLVM_PATH=SYSTEM_BAD[0])
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
+    assert r.returncode == 3, r.stdout + r.stderr
+    assert "imported before tracer" in r.stdout and "LLVM ERROR" not in r.stderr

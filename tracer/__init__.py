@@ -9,16 +9,10 @@ use (see :mod:`tracer.llvm`); it must therefore be imported before drjit.
 (240, 320, 3)
 """
 
-import sys as _sys
-
 from tracer import llvm as _llvm
 
-if "drjit" in _sys.modules:  # too late to choose the library; say so once
-    import os as _os
-
-    if not _os.environ.get("DRJIT_LIBLLVM_PATH"):
-        print("whitted: warning: drjit was imported before tracer; it may have loaded a "
-              "libLLVM that aborts (import tracer first)", file=_sys.stderr)
+# Dr.Jit loads libLLVM when it is imported: too late to choose then. A bad
+# library already loaded is refused by tracer.backend.use() with advice.
 _llvm.configure()
 
 from tracer.errors import SceneError, UserError  # noqa: E402

@@ -66,6 +66,7 @@ def use(name: str | None = None) -> str:
     if requested == "auto":
         requested = "cuda" if _cuda_driver_has_device() else "llvm"
     if requested == "llvm":
+        llvm.check_loaded()  # drjit imported too early with a bad library
         llvm.require()  # raises LLVMUnavailable with its one-line advice
 
     import drjit as dr

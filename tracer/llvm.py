@@ -251,6 +251,35 @@ def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
         f"{INSTALL_HINT}")
 
 
+def loaded_libllvm() -> str | None:
+    """The libLLVM already mapped into this process (Linux), or None."""
+    try:
+        with open("/proc/self/maps") as f:
+            for line in f:
+                path = line.split()[-1] if line.strip() else ""
+                if "libLLVM" in os.path.basename(path):
+                    return path
+    except OSError:
+        pass
+    return None
+
+
+def check_loaded() -> None:
+    """Refuse to go on when Dr.Jit already loaded a libLLVM that aborts.
+
+    Dr.Jit loads libLLVM when it is imported; a program that imported drjit
+    (or mitsuba) before ``tracer`` may hold a library that would abort at the
+    first kernel. Raises :class:`LLVMUnavailable` with advice in that case.
+    """
+    path = loaded_libllvm()
+    major = llvm_major(path) if path else None
+    if major in KNOWN_BAD:
+        raise LLVMUnavailable(
+            f"drjit was imported before tracer and loaded {path} (LLVM {major}, which "
+            f"{KNOWN_BAD[major]}); import tracer (or reference) before drjit and mitsuba, "
+            f"or set DRJIT_LIBLLVM_PATH to libLLVM {KNOWN_GOOD_FROM} or newer")
+
+
 _chosen: Candidate | None = None
 _error: LLVMUnavailable | None = None
 
