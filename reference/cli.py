@@ -200,6 +200,47 @@ def cmd_export(args) -> int:
     return EXIT_OK
 
 
+def cmd_fresnel(args) -> int:
+    from tracer.errors import UserError
+
+    for ior in args.ior:
+        if not (ior > 0 and ior < 1e6):
+            raise UserError(f"--ior: expected positive numbers, got {ior:g}")
+    if args.samples < 100:
+        raise UserError(f"--samples: expected at least 100, got {args.samples}")
+    if not 0 < args.step <= 45:
+        raise UserError(f"--step: expected a number of degrees in (0, 45], got {args.step:g}")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: exists and is not a folder")
+    _backend(args)
+    from reference.fresnel_curves import fresnel_table, write_outputs
+
+    table = fresnel_table(tuple(args.ior), args.step, args.samples, args.seed)
+    files = write_outputs(table, out)
+    print(format_fresnel(table))
+    print("wrote " + ", ".join(str(f) for f in files))
+    return EXIT_OK if table.passed else EXIT_FAIL
+
+
+def format_fresnel(table) -> str:
+    lines = [f"{'ior':>5} {'side':<8} {'|exact-mi.fresnel|':>19} {'/tol':>6} "
+             f"{'|plugin-exact|':>15} {'/CI':>6} {'|Schlick-exact|':>16} {'at':>6}  check"]
+    for s in table.summary:
+        ok = s["exact_vs_mitsuba_within_float32"] and s["exact_within_plugin_interval"]
+        lines.append(
+            f"{s['ior']:5g} {s['side']:<8} {s['max_abs_exact_minus_mitsuba']:19.2e} "
+            f"{s['worst_exact_vs_mitsuba_over_tolerance']:6.2f} "
+            f"{s['max_abs_plugin_minus_exact']:15.2e} "
+            f"{s['worst_plugin_deviation_in_half_intervals']:6.2f} "
+            f"{s['max_abs_schlick_minus_exact']:16.4f} {s['schlick_worst_theta_deg']:5.1f}d  "
+            f"{'pass' if ok else 'FAIL'}")
+    lines.append(("PASS" if table.passed else "FAIL") +
+                 " (exact vs mi.fresnel within float32 rounding; exact inside the plugin's "
+                 "binomial interval)")
+    return "\n".join(lines)
+
+
 def cmd_scenes(args) -> int:
     from tracer import load_scene
 
@@ -270,6 +311,25 @@ def build_parser() -> argparse.ArgumentParser:
                    help="integrator written into the XML (whitted needs `import reference` "
                         "before loading; direct and path are stock Mitsuba)")
     e.set_defaults(func=cmd_export)
+
+    f = sub.add_parser("fresnel", help="compare Fresnel curves with Mitsuba's",
+                       description="Tabulate our exact Fresnel reflectance and Schlick's "
+                                   "approximation over 0..90 degrees from both sides of the "
+                                   "boundary, against mi.fresnel and the reflection probability "
+                                   "of Mitsuba's dielectric plugin (measured by sampling). "
+                                   "Writes fresnel.csv, fresnel.png and fresnel.json; exits 1 "
+                                   "when exact and mi.fresnel differ beyond float32 rounding or "
+                                   "the plugin disagrees beyond its binomial interval.")
+    f.add_argument("-o", "--output", required=True, help="output folder")
+    f.add_argument("--ior", type=float, nargs="+", default=[1.0, 1.33, 1.5, 2.42],
+                   help="indices of refraction against ext_ior = 1 (default: 1.0 1.33 1.5 2.42)")
+    f.add_argument("--step", type=float, default=0.5, help="angle step in degrees (default 0.5)")
+    f.add_argument("--samples", type=int, default=100_000,
+                   help="plugin samples per angle (default 100000)")
+    f.add_argument("--seed", type=int, default=0, help="seed of the plugin's sample numbers")
+    f.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                   help="Dr.Jit backend")
+    f.set_defaults(func=cmd_fresnel)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)

@@ -39,14 +39,16 @@ def fresnel_exact(cos_i, eta):
     R = (r_s^2 + r_p^2) / 2 with
     r_s = (n_i cos_i - n_t cos_t) / (n_i cos_i + n_t cos_t) and
     r_p = (n_t cos_i - n_i cos_t) / (n_t cos_i + n_i cos_t), R = 1 under total
-    internal reflection. R + T = 1. Equal indices give R = 0 at every angle.
+    internal reflection. R + T = 1. Equal indices give R = 0 at every angle
+    (no boundary at all, which also settles the 0/0 of grazing incidence).
     """
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
     r_s = (c - rel * cos_t) / (c + rel * cos_t)
     r_p = (rel * c - cos_t) / (rel * c + cos_t)
     r = 0.5 * (r_s * r_s + r_p * r_p)
-    return dr.select(tir, 1.0, r)
+    r = dr.select(tir, 1.0, r)
+    return dr.select(rel == 1, 0.0, r)
 
 
 def schlick_r0(eta):

@@ -1,0 +1,254 @@
+"""Fresnel curves: our exact and Schlick formulas against Mitsuba's, over 0..90 degrees.
+
+For each index of refraction and each side of the boundary (``outside``: the
+ray arrives from the ext_ior = 1 side; ``inside``: from the ior side, through
+total internal reflection), four reflectances are tabulated per angle:
+
+* ``exact``: :func:`tracer.fresnel.fresnel_exact`, in float32;
+* ``schlick``: :func:`tracer.fresnel.fresnel_schlick`, in float32;
+* ``mitsuba``: ``mi.fresnel``, Mitsuba's implementation, in float32;
+* ``plugin``: the probability with which Mitsuba's ``dielectric`` plugin
+  chooses reflection in ``BSDF.sample``, measured as the fraction of
+  reflections among N samples drawn with independent uniform numbers.
+
+Two checks decide the exit status:
+
+* exact vs ``mi.fresnel``: both evaluate the same formula in float32, so they
+  may differ only as much as rounding allows. The allowance at each angle is
+  the change of R (computed in float64) when cos(theta) moves by 16 ulp, plus
+  16 ulp of R: near the critical angle, where dR/dcos is unbounded, rounding
+  legitimately moves R by far more than an ulp;
+* exact vs plugin: k reflections in N independent trials are binomial; the
+  exact R must lie in the Wilson score interval of k / N at confidence
+  1 - 0.01 / M for M angles in all (Bonferroni), so that a correct plugin
+  fails the whole table with probability below 1 %.
+
+Schlick's approximation is not required to agree; its largest error is reported.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+DEFAULT_IORS = (1.0, 1.33, 1.5, 2.42)
+ULP = 2.0 ** -24
+ALPHA = 0.01
+
+
+def exact64(cos_i: np.ndarray, eta: float) -> np.ndarray:
+    """The exact Fresnel reflectance in float64 (numpy), the yardstick for rounding."""
+    c = np.abs(cos_i)
+    rel = np.where(cos_i >= 0, eta, 1 / eta)
+    sin2_t = (1 - c * c) / (rel * rel)
+    tir = sin2_t > 1
+    ct = np.sqrt(np.maximum(1 - sin2_t, 0))
+    with np.errstate(invalid="ignore", divide="ignore"):
+        rs = (c - rel * ct) / (c + rel * ct)
+        rp = (rel * c - ct) / (rel * c + ct)
+        r = 0.5 * (rs * rs + rp * rp)
+    r = np.where(tir, 1.0, r)
+    return np.where(rel == 1, 0.0, np.where(c == 0, 1.0, r))
+
+
+def float32_tolerance(cos_i: np.ndarray, eta: float, ulps: int = 16) -> np.ndarray:
+    """How far two float32 evaluations of R may differ at cos_i (see module doc)."""
+    d = ulps * ULP * np.maximum(np.abs(cos_i), ULP)
+    r = exact64(cos_i, eta)
+    up = np.abs(exact64(np.clip(cos_i + d, -1, 1), eta) - r)
+    down = np.abs(exact64(np.clip(cos_i - d, -1, 1), eta) - r)
+    # Do not step across zero: the side of the boundary is not a rounding matter.
+    up = np.where(np.sign(cos_i + d) != np.sign(cos_i), 0, up)
+    down = np.where(np.sign(cos_i - d) != np.sign(cos_i), 0, down)
+    return np.maximum(up, down) + ulps * ULP * np.maximum(r, ULP)
+
+
+def wilson_interval(k: np.ndarray, n: int, z: float) -> tuple[np.ndarray, np.ndarray]:
+    """Wilson score interval for a binomial proportion k / n."""
+    p = k / n
+    den = 1 + z * z / n
+    centre = (p + z * z / (2 * n)) / den
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / den
+    return np.maximum(centre - half, 0), np.minimum(centre + half, 1)
+
+
+def normal_quantile(p: float) -> float:
+    """z with P(Z > z) = p for a standard normal Z (bisection on erfc)."""
+    lo, hi = 0.0, 40.0
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        if 0.5 * math.erfc(mid / math.sqrt(2)) > p:
+            lo = mid
+        else:
+            hi = mid
+    return (lo + hi) / 2
+
+
+@dataclass
+class FresnelTable:
+    rows: list[dict]
+    summary: list[dict]
+    passed: bool
+    samples: int
+
+
+def _ours(cos_i: np.ndarray, eta: float):
+    from tracer import fresnel
+    from tracer.backend import jit
+
+    c = jit.Float(cos_i.astype(np.float32))
+    e = jit.Float(np.float32(eta))
+    return (np.asarray(fresnel.fresnel_exact(c, e), dtype=np.float64),
+            np.asarray(fresnel.fresnel_schlick(c, e), dtype=np.float64))
+
+
+def _plugin_reflect_fraction(mi, ior: float, cos_i: np.ndarray, samples: int, seed: int):
+    """Reflections counted in ``samples`` calls of the dielectric plugin's sample() per angle."""
+    import drjit as dr
+
+    bsdf = mi.load_dict({"type": "dielectric", "int_ior": float(ior), "ext_ior": 1.0})
+    m = len(cos_i)
+    n = m * samples
+    idx = np.repeat(np.arange(m), samples)
+    c = cos_i[idx].astype(np.float32)
+    s = np.sqrt(np.maximum(1 - c.astype(np.float64) ** 2, 0)).astype(np.float32)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = mi.Vector3f(mi.Float(s), mi.Float(np.zeros(n, np.float32)), mi.Float(c))
+    si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
+    rng = np.random.default_rng(seed)
+    # Uniform in (0, 1): the plugin reflects when u <= R, so u = 0 would reflect even
+    # where R = 0 (equal indices); 24-bit values are exact in float32.
+    u1 = mi.Float((rng.integers(1, 1 << 24, n) / float(1 << 24)).astype(np.float32))
+    bs, weight = bsdf.sample(mi.BSDFContext(), si, u1, mi.Point2f(0.5, 0.5))
+    reflected = np.asarray(mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection))
+    valid = np.asarray(dr.max(weight) > 0) | reflected
+    k = np.bincount(idx, weights=reflected & valid, minlength=m)
+    return k
+
+
+def fresnel_table(iors=DEFAULT_IORS, step: float = 0.5, samples: int = 100_000,
+                  seed: int = 0) -> FresnelTable:
+    """Tabulate and check the curves for every ior and both sides (see module doc)."""
+    from reference import mitsuba
+
+    mi = mitsuba()
+    theta = np.arange(0, 90 + 1e-9, step)
+    grazing = theta >= 90 - 1e-9       # the plugin has no direction to sample at 90 degrees
+    tests = len(iors) * 2 * int((~grazing).sum())
+    z = normal_quantile(ALPHA / tests / 2)
+    rows, summary = [], []
+    passed = True
+    for ior in iors:
+        for side, sign in (("outside", 1.0), ("inside", -1.0)):
+            cos_i = sign * np.cos(np.radians(theta))
+            cos_i = np.where(grazing, 0.0, cos_i) if sign > 0 else np.where(grazing, -0.0, cos_i)
+            cos32 = cos_i.astype(np.float32).astype(np.float64)
+            exact, schlick = _ours(cos32, ior)
+            r_mi, _, _, _ = mi.fresnel(mi.Float(cos32.astype(np.float32)), mi.Float(ior))
+            r_mi = np.asarray(r_mi, dtype=np.float64)
+            k = _plugin_reflect_fraction(mi, ior, cos32[~grazing], samples, seed)
+            plugin = np.full(len(theta), np.nan)
+            plugin[~grazing] = k / samples
+            lo, hi = wilson_interval(k, samples, z)
+            tol = float32_tolerance(cos32, ior)
+            d_mi = np.abs(exact - r_mi)
+            d_plugin_ok = (exact[~grazing] >= lo - 1e-12) & (exact[~grazing] <= hi + 1e-12)
+            d_s = np.abs(schlick - exact)
+            ok_mi = bool(np.all(d_mi <= tol))
+            ok_plugin = bool(np.all(d_plugin_ok))
+            passed &= ok_mi and ok_plugin
+            crit = math.degrees(math.asin(1 / ior)) if side == "inside" and ior > 1 else None
+            worst_plugin = np.abs(exact[~grazing] - plugin[~grazing]) / np.maximum(
+                (hi - lo) / 2, 1e-12)
+            summary.append({
+                "ior": ior, "side": side, "critical_angle_deg": crit,
+                "max_abs_exact_minus_mitsuba": float(d_mi.max()),
+                "at_theta_deg": float(theta[int(np.argmax(d_mi))]),
+                "exact_vs_mitsuba_within_float32": ok_mi,
+                "worst_exact_vs_mitsuba_over_tolerance": float(np.max(d_mi / tol)),
+                "max_abs_schlick_minus_exact": float(d_s.max()),
+                "schlick_worst_theta_deg": float(theta[int(np.argmax(d_s))]),
+                "max_abs_plugin_minus_exact": float(np.nanmax(np.abs(plugin - exact))),
+                "worst_plugin_deviation_in_half_intervals": float(worst_plugin.max()),
+                "exact_within_plugin_interval": ok_plugin,
+                "plugin_samples_per_angle": samples,
+                "interval_z": z,
+            })
+            for i, t in enumerate(theta):
+                rows.append({"ior": ior, "side": side, "theta_deg": float(t),
+                             "exact": float(exact[i]), "schlick": float(schlick[i]),
+                             "mitsuba": float(r_mi[i]),
+                             "plugin": None if np.isnan(plugin[i]) else float(plugin[i])})
+    return FresnelTable(rows, summary, passed, samples)
+
+
+def write_outputs(table: FresnelTable, outdir: str | Path) -> list[Path]:
+    """fresnel.csv, fresnel.json and fresnel.png in ``outdir``."""
+    out = Path(outdir)
+    out.mkdir(parents=True, exist_ok=True)
+    csv_path = out / "fresnel.csv"
+    with csv_path.open("w", newline="") as f:
+        w = csv.writer(f)
+        w.writerow(["ior", "side", "theta_deg", "exact", "schlick", "mitsuba", "plugin"])
+        for r in table.rows:
+            w.writerow([f"{r['ior']:g}", r["side"], f"{r['theta_deg']:g}", f"{r['exact']:.9g}",
+                        f"{r['schlick']:.9g}", f"{r['mitsuba']:.9g}",
+                        "" if r["plugin"] is None else f"{r['plugin']:.9g}"])
+    json_path = out / "fresnel.json"
+    json_path.write_text(json.dumps({"pass": table.passed, "samples_per_angle": table.samples,
+                                     "curves": table.summary}, indent=2) + "\n")
+    png_path = out / "fresnel.png"
+    plot(table, png_path)
+    return [csv_path, json_path, png_path]
+
+
+def plot(table: FresnelTable, path: str | Path) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    iors = sorted({r["ior"] for r in table.rows})
+    fig, axes = plt.subplots(2, 2, figsize=(11, 7.5), dpi=100)
+    colors = plt.rcParams["axes.prop_cycle"].by_key()["color"]
+    for col, side in enumerate(("outside", "inside")):
+        ax, ex = axes[0, col], axes[1, col]
+        for i, ior in enumerate(iors):
+            rs = [r for r in table.rows if r["ior"] == ior and r["side"] == side]
+            th = np.array([r["theta_deg"] for r in rs])
+            e = np.array([r["exact"] for r in rs])
+            s = np.array([r["schlick"] for r in rs])
+            m = np.array([r["mitsuba"] for r in rs])
+            p = np.array([np.nan if r["plugin"] is None else r["plugin"] for r in rs])
+            c = colors[i % len(colors)]
+            ax.plot(th, e, color=c, lw=1.6, label=f"n = {ior:g} exact")
+            ax.plot(th, s, color=c, lw=1, ls="--", label=f"n = {ior:g} Schlick")
+            ax.plot(th[::6], p[::6], "o", color=c, ms=3, mfc="none")
+            ex.semilogy(th, np.maximum(np.abs(s - e), 1e-12), color=c, ls="--", lw=1)
+            ex.semilogy(th, np.maximum(np.abs(e - m), 1e-12), color=c, lw=1)
+            ex.semilogy(th, np.maximum(np.abs(p - e), 1e-12), ".", color=c, ms=2)
+        ax.set_title(f"reflectance, ray from {side}" +
+                     (" (1 -> n)" if side == "outside" else " (n -> 1)"), fontsize=10)
+        ax.set_xlabel("angle of incidence (degrees)")
+        ax.set_ylabel("R")
+        ax.set_xlim(0, 90)
+        ax.set_ylim(-0.02, 1.02)
+        ax.grid(alpha=0.3)
+        ex.set_title("errors: |Schlick - exact| (dashed), |exact - mi.fresnel| (solid), "
+                     "|plugin - exact| (dots)", fontsize=8)
+        ex.set_xlabel("angle of incidence (degrees)")
+        ex.set_ylabel("absolute difference")
+        ex.set_xlim(0, 90)
+        ex.set_ylim(1e-10, 1.5)
+        ex.grid(alpha=0.3)
+    axes[0, 0].legend(fontsize=7, ncol=2, loc="upper left")
+    axes[0, 1].text(2, 0.9, "o: Mitsuba dielectric plugin,\nfraction of sampled reflections",
+                    fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path)
+    plt.close(fig)
