@@ -162,6 +162,12 @@ def format_comparison(c) -> str:
     ratio = s.get("ratio_mitsuba_over_tracer")
     lines.append(f"  seconds: tracer {s['tracer']:.3f}, Mitsuba {s['mitsuba']:.3f}"
                  + (f" (Mitsuba / tracer = {ratio:.2f})" if ratio else ""))
+    if c.expected_deviation:
+        e = c.expected_deviation
+        lines.append(f"  expected deviation of the full render (tracer-only: "
+                     f"{', '.join(c.tracer_only)}): median rel. {e['median_rel']:.2e}, pixels "
+                     f"beyond 5 % {100 * e['frac_over_5pct']:.2f} %, means differ by "
+                     f"{100 * e['mean_rel_diff']:.3f} %")
     lines.append(("PASS" if c.passed else "FAIL") + f" ({c.reason})")
     return "\n".join(lines)
 
@@ -239,6 +245,35 @@ def format_fresnel(table) -> str:
                  " (exact vs mi.fresnel within float32 rounding; exact inside the plugin's "
                  "binomial interval)")
     return "\n".join(lines)
+
+
+def cmd_report(args) -> int:
+    from reference.report import build_report, select_scenes
+    from tracer.errors import UserError
+
+    scenes_dir = Path(args.scenes_dir) if args.scenes_dir else SCENES_DIR
+    if not scenes_dir.is_dir():
+        raise UserError(f"{scenes_dir}: no such folder of scenes")
+    paths = select_scenes(scenes_dir, args.scenes)
+    if not paths:
+        raise UserError(f"no scene in {scenes_dir} matches {args.scenes!r}")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: exists and is not a folder")
+    from tracer import load_scene
+
+    for p in paths:  # refuse a bad scene before any rendering
+        load_scene(p)
+    _backend(args)
+    print(f"whitted report: {len(paths)} scene(s){' (quick)' if args.quick else ''} "
+          f"+ Fresnel curves -> {out}/", flush=True)
+    report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel)
+    print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
+          f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
+          + ("" if args.no_fresnel else
+             f", Fresnel curves {'pass' if report.fresnel_passed else 'FAIL'}")
+          + f"; wrote {out}/index.html, report.md, report.json")
+    return EXIT_OK if report.passed else EXIT_FAIL
 
 
 def cmd_scenes(args) -> int:
@@ -330,6 +365,25 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                    help="Dr.Jit backend")
     f.set_defaults(func=cmd_fresnel)
+
+    rp = sub.add_parser("report", help="compare every scene and write an accuracy report",
+                        description="Compare every scene in the scenes folder with Mitsuba and "
+                                    "check the Fresnel curves; write index.html (for people), "
+                                    "report.md (for CI logs) and report.json (for machines). "
+                                    "Exit 1 when a scene or curve fails.")
+    rp.add_argument("-o", "--output", default="reports",
+                    help="output folder (default: reports/)")
+    rp.add_argument("--scenes", metavar="GLOB", default=None,
+                    help="only scenes whose file name matches GLOB, e.g. 'glass*'")
+    rp.add_argument("--scenes-dir", default=None,
+                    help="folder of scenes (default: the built-in scenes/)")
+    rp.add_argument("--quick", action="store_true",
+                    help="smaller images (<= 96 px wide), <= 16 spp, fewer reference passes "
+                         "and a coarser Fresnel table: minutes instead of tens of minutes")
+    rp.add_argument("--no-fresnel", action="store_true", help="skip the Fresnel curves")
+    rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                    help="Dr.Jit backend")
+    rp.set_defaults(func=cmd_report)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)

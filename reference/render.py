@@ -18,7 +18,7 @@ INTEGRATORS = ("whitted", "direct", "path")
 class ReferenceResult:
     """Mitsuba's image, and (with moments) the variance of each pixel's mean."""
     image: np.ndarray                 # H x W x 3 float32, linear
-    seconds: float                    # one pass at the scene's spp (comparable to the tracer)
+    seconds: float                    # one warm pass at the scene's spp (kernels compiled)
     spp: int
     integrator: str
     variance: np.ndarray | None = None  # H x W x 3, variance of the pixel mean
@@ -50,20 +50,26 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     with_moments = moments and integrator == "whitted"
     ms = load(scene, mi, integrator, with_moments, jitter)
     spp = scene.film.strata ** 2
-    total = first = 0.0
+    total = 0.0
+    warm = []
     mean = m2 = None
     for k in range(passes):
         start = time.perf_counter()
         out = np.asarray(mi.render(ms, seed=seed + k, spp=spp), dtype=np.float64)
         elapsed = time.perf_counter() - start
-        first = elapsed if k == 0 else first
         total += elapsed
+        if k > 0:
+            warm.append(elapsed)
         img = out[..., :3]
         mean = img / passes if mean is None else mean + img / passes
         if with_moments:
             m2 = out[..., -3:] / passes if m2 is None else m2 + out[..., -3:] / passes
+    if not warm:  # one pass: time a second, warm one (its image is not used)
+        start = time.perf_counter()
+        np.asarray(mi.render(ms, seed=seed + 1, spp=spp))
+        warm.append(time.perf_counter() - start)
     variance = None
     if with_moments:
         variance = (np.maximum(m2 - mean ** 2, 0) / (spp * passes)).astype(np.float32)
-    return ReferenceResult(mean.astype(np.float32), first, spp, integrator, variance, passes,
-                           total)
+    return ReferenceResult(mean.astype(np.float32), float(np.median(warm)), spp, integrator,
+                           variance, passes, total)

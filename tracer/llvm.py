@@ -106,7 +106,7 @@ def _package_candidates() -> list[Candidate]:
     for f in dist.files or ():
         name = os.path.basename(str(f))
         if re.match(r"libLLVM(-\d+)?\.(so|dylib)", name):
-            p = str(dist.locate_file(f))
+            p = os.path.normpath(str(dist.locate_file(f)))
             if os.path.isfile(p):
                 found.append(Candidate(p, llvm_major(p), "karellen-llvm-core"))
     # Prefer the fully versioned file name: it is the real library, not a link.

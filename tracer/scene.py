@@ -170,6 +170,8 @@ class Scene:
     lights: tuple[Light, ...]
     shapes: tuple[Shape, ...]
     description: str = ""
+    #: parts of the scene that only the tracer models (``[compare] tracer_only``)
+    tracer_only: tuple[str, ...] = ()
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -198,6 +200,11 @@ class Scene:
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
+
+    def uses_schlick(self) -> bool:
+        used = {s.material for s in self.shapes}
+        return any(isinstance(m, Dielectric) and m.fresnel == "schlick"
+                   for name, m in self.materials.items() if name in used)
 
 
 # ---------------------------------------------------------------------------
@@ -338,7 +345,9 @@ SHAPE_TYPES = ("sphere", "rectangle", "triangle")
 MATERIAL_TYPES = ("diffuse", "mirror", "dielectric")
 LIGHT_TYPES = ("point", "directional", "spot")
 CAMERA_TYPES = ("perspective", "orthographic")
-TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes")
+TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare")
+#: Features a scene may declare tracer-only: Mitsuba has no counterpart.
+TRACER_ONLY = ("schlick",)
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -377,9 +386,15 @@ def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     lights = tuple(_parse_light(t) for t in _array_of_tables(top, "lights"))
     shapes_t = _array_of_tables(top, "shapes")
     shapes = tuple(_parse_shape(t, materials) for t in shapes_t)
+    cmp_t = top.table("compare", {})
+    tracer_only = cmp_t.raw("tracer_only", [])
+    if not isinstance(tracer_only, list) or any(x not in TRACER_ONLY for x in tracer_only):
+        cmp_t.fail("tracer_only", "expected a list of: " + ", ".join(f'"{x}"' for x in TRACER_ONLY)
+                   + f", got {_show(tracer_only)}")
+    cmp_t.finish()
     top.finish()
     return Scene(path=path, film=film, camera=camera, materials=materials, lights=lights,
-                 shapes=shapes, description=description)
+                 shapes=shapes, description=description, tracer_only=tuple(tracer_only))
 
 
 def _array_of_tables(top: _Table, key: str) -> list[_Table]:

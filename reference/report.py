@@ -1,0 +1,410 @@
+"""Accuracy reports: every built-in scene compared with Mitsuba, and the Fresnel curves.
+
+:func:`build_report` renders each scene with both renderers (see
+:mod:`reference.compare` for the tests and their tolerances), tabulates the
+Fresnel curves (:mod:`reference.fresnel_curves`), and writes three files:
+
+* ``index.html``: one self-contained page (images embedded) for people;
+* ``report.md``: the summary as Markdown, for a CI log or job summary;
+* ``report.json``: the same for machines; its schema is in the README.
+
+``--quick`` renders every scene smaller and with fewer samples per pixel: the
+tests keep their meaning at any size and sample count (the exact-strata test
+is deterministic; the z-test's reference pools the same 1024 samples per
+pixel either way), so a quick report checks the same things on fewer pixels.
+"""
+
+from __future__ import annotations
+
+import base64
+import datetime as _dt
+import fnmatch
+import html
+import io
+import json
+import os
+import platform
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+QUICK_WIDTH = 96
+QUICK_SPP = 16
+QUICK_FRESNEL = {"step": 1.0, "samples": 20_000}
+FULL_FRESNEL = {"step": 0.5, "samples": 100_000}
+
+
+@dataclass
+class Report:
+    passed: bool
+    versions: dict
+    machine: dict
+    date: str
+    quick: bool
+    scenes: list = field(default_factory=list)        # Comparison.to_json() dicts
+    fresnel: list = field(default_factory=list)       # fresnel summary rows
+    fresnel_passed: bool = True
+    seconds: float = 0.0
+
+    def to_json(self) -> dict:
+        return {"pass": self.passed, "quick": self.quick, "date": self.date,
+                "versions": self.versions, "machine": self.machine,
+                "seconds": self.seconds, "scenes": self.scenes,
+                "fresnel_pass": self.fresnel_passed, "fresnel": self.fresnel}
+
+
+def versions() -> dict:
+    from importlib import metadata
+
+    from tracer import backend, llvm
+
+    def v(name):
+        try:
+            return metadata.version(name)
+        except metadata.PackageNotFoundError:
+            return None
+
+    chosen = llvm.configure()
+    out = {"whitted": v("whitted"), "mitsuba": v("mitsuba"), "drjit": v("drjit"),
+           "numpy": v("numpy"), "python": platform.python_version(),
+           "backend": backend.name(), "mitsuba_variant": backend.mitsuba_variant()}
+    if backend.name() == "llvm":
+        out["libllvm"] = {"path": chosen.path if chosen else None,
+                          "major": chosen.major if chosen else None,
+                          "source": chosen.source if chosen else None}
+    return out
+
+
+def machine() -> dict:
+    cpu = platform.processor() or platform.machine()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                cpu = line.split(":", 1)[1].strip()
+                break
+    except OSError:
+        pass
+    gpu = None
+    from tracer import backend
+
+    if backend.name() == "cuda":
+        try:
+            import subprocess
+
+            gpu = subprocess.run(["nvidia-smi", "--query-gpu=name", "--format=csv,noheader"],
+                                 capture_output=True, text=True, timeout=10).stdout.strip()
+        except (OSError, subprocess.SubprocessError):
+            gpu = "unknown CUDA device"
+    return {"host": platform.node(), "os": f"{platform.system()} {platform.release()}",
+            "cpu": cpu, "cores": os.cpu_count(), "gpu": gpu}
+
+
+def select_scenes(scenes_dir: Path, pattern: str | None) -> list[Path]:
+    paths = sorted(scenes_dir.glob("*.toml"))
+    if pattern:
+        paths = [p for p in paths if fnmatch.fnmatch(p.name, pattern)
+                 or fnmatch.fnmatch(p.stem, pattern) or fnmatch.fnmatch(str(p), pattern)]
+    return paths
+
+
+def quick_overrides(scene):
+    w, h = scene.film.width, scene.film.height
+    if w > QUICK_WIDTH:
+        h = max(8, round(h * QUICK_WIDTH / w))
+        w = QUICK_WIDTH
+    return scene.with_overrides(size=(w, h), spp=min(scene.film.spp, QUICK_SPP))
+
+
+def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = False,
+                 log=print, fresnel: bool = True) -> Report:
+    """Compare every scene, tabulate the Fresnel curves, write the three report files."""
+    from reference.compare import compare_scene
+    from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
+    from tracer import load_scene
+
+    start = time.perf_counter()
+    out = Path(outdir)
+    work = out / "scenes"
+    work.mkdir(parents=True, exist_ok=True)
+    scenes = [load_scene(p) for p in scene_paths]  # all validated before any rendering
+    report = Report(passed=True, versions=versions(), machine=machine(),
+                    date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"),
+                    quick=quick)
+    total = len(scenes) + (1 if fresnel else 0)
+    for i, scene in enumerate(scenes, 1):
+        if quick:
+            scene = quick_overrides(scene)
+        t0 = time.perf_counter()
+        result, tracer_img, ref_img = compare_scene(scene, work / scene.name)
+        entry = scene_entry(result)
+        entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
+        report.scenes.append(entry)
+        report.passed &= result.passed
+        log(f"[{i}/{total}] {scene.name:<20} {result.test:<13} "
+            f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    if fresnel:
+        t0 = time.perf_counter()
+        params = QUICK_FRESNEL if quick else FULL_FRESNEL
+        table = fresnel_table(DEFAULT_IORS, params["step"], params["samples"])
+        plot(table, out / "fresnel.png")
+        report.fresnel = table.summary
+        report.fresnel_passed = table.passed
+        report.passed &= table.passed
+        log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<13} "
+            f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    report.seconds = time.perf_counter() - start
+    data = report.to_json()
+    data["scenes"] = [{k: v for k, v in s.items() if k != "images"} for s in report.scenes]
+    (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
+    (out / "report.md").write_text(markdown(report))
+    (out / "index.html").write_text(html_page(report, out))
+    return report
+
+
+def scene_entry(c) -> dict:
+    """A scene's record in report.json (schema in the README)."""
+    d = c.to_json()
+    return {"name": d["scene"], "pass": d["passed"], "test": d["test"],
+            "metrics": d["metrics"], "checks": d["checks"], "reason": d["reason"],
+            "seconds": d["seconds"], "size": d["size"], "spp": d["spp"],
+            "max_depth": d["max_depth"], "integrator": d["integrator"],
+            "backend": d["backend"], "description": d["description"],
+            "tracer_only": d["tracer_only"], "expected_deviation": d["expected_deviation"],
+            "files": d["files"]}
+
+
+def _png_bytes(image: np.ndarray, scale: int = 1) -> bytes:
+    from PIL import Image
+
+    from tracer.imageio import to_srgb8
+
+    img = Image.fromarray(to_srgb8(image), "RGB")
+    if scale > 1:
+        img = img.resize((img.width * scale, img.height * scale), Image.NEAREST)
+    buf = io.BytesIO()
+    img.save(buf, format="PNG")
+    return buf.getvalue()
+
+
+def _scene_images(folder: Path, tracer_img, ref_img) -> dict:
+    imgs = {"tracer": _png_bytes(tracer_img), "mitsuba": _png_bytes(ref_img),
+            "diff": (folder / "diff.png").read_bytes()}
+    if (folder / "deviation.png").exists():
+        imgs["deviation"] = (folder / "deviation.png").read_bytes()
+    return imgs
+
+
+# ------------------------------------------------------------------ Markdown
+
+_LABEL = {"median_rel": "median rel.", "frac_over_5pct": "px > 5 %",
+          "mean_rel_diff": "mean diff.", "z_fraction_passed": "z-test pass",
+          "block_median_rel": "block median", "block_frac_over_5pct": "blocks > 5 %"}
+_PCT = {"frac_over_5pct", "z_fraction_passed", "block_frac_over_5pct"}
+
+
+def _fmt_check(key: str, c: dict) -> str:
+    rel = ">=" if key == "z_fraction_passed" else "<"
+    if key in _PCT:
+        return f"{100 * c['value']:.2f} % {rel} {100 * c['limit']:.2f} %"
+    return f"{c['value']:.1e} {rel} {c['limit']:.0e}"
+
+
+def markdown(report: Report) -> str:
+    v = report.versions
+    lines = [f"# whitted accuracy report: {'PASS' if report.passed else 'FAIL'}", "",
+             f"{report.date}, {'quick' if report.quick else 'full'} run, backend "
+             f"{v.get('backend')}, whitted {v.get('whitted')}, mitsuba {v.get('mitsuba')}, "
+             f"drjit {v.get('drjit')}, {report.machine.get('cpu')} ({report.machine.get('cores')}"
+             f" cores), {report.seconds:.0f} s", "",
+             "| scene | size, spp, depth | test | checks | FLIP | tracer s | Mitsuba s | "
+             "Mitsuba/tracer | result |",
+             "|---|---|---|---|---|---|---|---|---|"]
+    for s in report.scenes:
+        checks = "; ".join(f"{_LABEL.get(k, k)} {_fmt_check(k, c)}" for k, c in s["checks"].items())
+        sec = s["seconds"]
+        ratio = sec.get("ratio_mitsuba_over_tracer")
+        flip = s["metrics"].get("flip")
+        result = "pass" if s["pass"] else "**FAIL**"
+        if s.get("tracer_only"):
+            result += f" (tracer-only: {', '.join(s['tracer_only'])})"
+        lines.append(f"| {s['name']} | {s['size'][0]}x{s['size'][1]}, {s['spp']}, "
+                     f"{s['max_depth']} | {s['test']} | {checks} | "
+                     f"{'n/a' if flip is None else f'{flip:.4f}'} | {sec['tracer']:.3f} | "
+                     f"{sec['mitsuba']:.3f} | {'' if ratio is None else f'{ratio:.2f}'} | "
+                     f"{result} |")
+    if report.fresnel:
+        lines += ["", "## Fresnel curves", "",
+                  "| ior | side | max abs(exact - mi.fresnel) | / float32 tol. | "
+                  "max abs(plugin - exact) | / half interval | max abs(Schlick - exact) | "
+                  "at | result |", "|---|---|---|---|---|---|---|---|---|"]
+        for f in report.fresnel:
+            ok = f["exact_vs_mitsuba_within_float32"] and f["exact_within_plugin_interval"]
+            lines.append(
+                f"| {f['ior']:g} | {f['side']} | {f['max_abs_exact_minus_mitsuba']:.1e} | "
+                f"{f['worst_exact_vs_mitsuba_over_tolerance']:.2f} | "
+                f"{f['max_abs_plugin_minus_exact']:.1e} | "
+                f"{f['worst_plugin_deviation_in_half_intervals']:.2f} | "
+                f"{f['max_abs_schlick_minus_exact']:.4f} | {f['schlick_worst_theta_deg']:.1f} | "
+                f"{'pass' if ok else '**FAIL**'} |")
+    lines.append("")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------------------------ HTML
+
+_CSS = """
+body { font: 14px/1.45 system-ui, sans-serif; margin: 24px auto; max-width: 1200px;
+       color: #1d1d1f; padding: 0 16px; }
+h1 { margin-bottom: 4px; } h2 { margin-top: 36px; border-bottom: 1px solid #ddd; }
+.pass { color: #137333; font-weight: 600; } .fail { color: #c5221f; font-weight: 600; }
+.expected { color: #8a5a00; font-weight: 600; }
+table { border-collapse: collapse; margin: 8px 0; font-size: 13px; }
+td, th { border: 1px solid #ddd; padding: 3px 8px; text-align: left; vertical-align: top; }
+th { background: #f4f4f6; }
+.imgs { display: flex; gap: 12px; flex-wrap: wrap; align-items: flex-start; }
+.imgs figure { margin: 0; } .imgs figcaption { font-size: 12px; color: #555; }
+.imgs img.render { width: 320px; image-rendering: pixelated; border: 1px solid #ccc; }
+.imgs img.map { height: 270px; }
+.meta { color: #555; font-size: 12px; } code { background: #f4f4f6; padding: 0 3px; }
+"""
+
+_ONLOAD = """
+window.addEventListener('load', function () {
+  var imgs = Array.prototype.slice.call(document.images);
+  var ok = imgs.filter(function (i) { return i.complete && i.naturalWidth > 0; }).length;
+  document.body.setAttribute('data-images-loaded', ok + '/' + imgs.length);
+  var el = document.getElementById('img-status');
+  if (el) { el.textContent = ok + ' of ' + imgs.length + ' images loaded'; }
+});
+"""
+
+
+def _img(data: bytes, cls: str, alt: str) -> str:
+    b64 = base64.b64encode(data).decode("ascii")
+    return f'<img class="{cls}" alt="{html.escape(alt)}" src="data:image/png;base64,{b64}">'
+
+
+def _verdict(ok: bool) -> str:
+    return '<span class="pass">PASS</span>' if ok else '<span class="fail">FAIL</span>'
+
+
+def html_page(report: Report, outdir: Path) -> str:
+    v, m = report.versions, report.machine
+    llvm = v.get("libllvm") or {}
+    esc = html.escape
+    parts = [
+        "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
+        "<title>whitted accuracy report</title>",
+        f"<style>{_CSS}</style><script>{_ONLOAD}</script></head><body>",
+        f"<h1>whitted accuracy report: {_verdict(report.passed)}</h1>",
+        f"<p class='meta'>{esc(report.date)} &middot; {'quick' if report.quick else 'full'} run "
+        f"&middot; {report.seconds:.0f} s &middot; <span id='img-status'></span></p>",
+        "<p>Each scene is rendered by whitted's Dr.Jit tracer and by Mitsuba 3 (through the "
+        "harness's Whitted integrator, which samples every light once per sample) at the same "
+        "strata. <b>exact-strata</b>: deterministic scenes must agree to float32 precision except "
+        "at single edge samples. <b>z-test</b>: scenes where Mitsuba samples lobes or lights are "
+        "judged per pixel against the reference's variance (Sidak-corrected, &ge; 99.75 % of "
+        "pixels) and on 4&times;4 blocks.</p>",
+        "<table><tr><th>whitted</th><th>mitsuba</th><th>drjit</th><th>backend</th>"
+        "<th>libLLVM</th><th>python</th><th>machine</th></tr>",
+        f"<tr><td>{esc(str(v.get('whitted')))}</td><td>{esc(str(v.get('mitsuba')))}</td>"
+        f"<td>{esc(str(v.get('drjit')))}</td><td>{esc(str(v.get('backend')))} "
+        f"({esc(str(v.get('mitsuba_variant')))})</td>"
+        f"<td>{esc(str(llvm.get('major', 'n/a')))} {esc(str(llvm.get('path', '')))}</td>"
+        f"<td>{esc(str(v.get('python')))}</td><td>{esc(str(m.get('cpu')))}, "
+        f"{m.get('cores')} cores{', ' + esc(m['gpu']) if m.get('gpu') else ''}, "
+        f"{esc(str(m.get('os')))}</td></tr></table>",
+        "<h2>Summary</h2><table><tr><th>scene</th><th>test</th><th>result</th>"
+        "<th>tracer s</th><th>Mitsuba s</th><th>Mitsuba / tracer</th></tr>",
+    ]
+    for s in report.scenes:
+        sec = s["seconds"]
+        ratio = sec.get("ratio_mitsuba_over_tracer")
+        extra = (f" <span class='expected'>(tracer-only: {esc(', '.join(s['tracer_only']))})"
+                 "</span>" if s.get("tracer_only") else "")
+        parts.append(f"<tr><td><a href='#{esc(s['name'])}'>{esc(s['name'])}</a></td>"
+                     f"<td>{s['test']}</td><td>{_verdict(s['pass'])}{extra}</td>"
+                     f"<td>{sec['tracer']:.3f}</td><td>{sec['mitsuba']:.3f}</td>"
+                     f"<td>{'' if ratio is None else f'{ratio:.2f}'}</td></tr>")
+    if report.fresnel:
+        parts.append(f"<tr><td><a href='#fresnel'>Fresnel curves</a></td><td>float32 / "
+                     f"binomial CI</td><td>{_verdict(report.fresnel_passed)}</td>"
+                     "<td></td><td></td><td></td></tr>")
+    parts.append("</table>")
+    for s in report.scenes:
+        parts.append(_scene_html(s, report))
+    if report.fresnel:
+        parts.append(_fresnel_html(report, outdir))
+    parts.append("</body></html>\n")
+    return "\n".join(parts)
+
+
+def _scene_html(s: dict, report: Report) -> str:
+    esc = html.escape
+    imgs = s["images"] if "images" in s else {}
+    sec = s["seconds"]
+    ratio = sec.get("ratio_mitsuba_over_tracer")
+    rows = []
+    for k, c in s["checks"].items():
+        rows.append(f"<tr><td>{esc(_LABEL.get(k, k))}</td><td>{_fmt_check(k, c)}</td>"
+                    f"<td>{_verdict(c['pass'])}</td></tr>")
+    m = s["metrics"]
+    flip = "n/a" if m.get("flip") is None else f"{m['flip']:.4f}"
+    figs = [f"<figure>{_img(imgs['tracer'], 'render', 'tracer')}<figcaption>tracer"
+            "</figcaption></figure>",
+            f"<figure>{_img(imgs['mitsuba'], 'render', 'Mitsuba')}<figcaption>Mitsuba"
+            "</figcaption></figure>",
+            f"<figure>{_img(imgs['diff'], 'map', 'relative difference')}<figcaption>relative "
+            "difference (log scale)</figcaption></figure>"]
+    dev = ""
+    if "deviation" in imgs:
+        figs.append(f"<figure>{_img(imgs['deviation'], 'map', 'expected deviation')}"
+                    "<figcaption>expected deviation of the full render</figcaption></figure>")
+        e = s.get("expected_deviation") or {}
+        dev = (f"<p class='expected'>Expected deviation (tracer-only: "
+               f"{esc(', '.join(s['tracer_only']))}): median rel. "
+               f"{e.get('median_rel', 0):.2e}, pixels beyond 5 %: "
+               f"{100 * e.get('frac_over_5pct', 0):.2f} %, image means differ by "
+               f"{100 * e.get('mean_rel_diff', 0):.2f} %. Not a failure: Mitsuba has no "
+               "counterpart; the check above uses Mitsuba's equivalent.</p>")
+    return (f"<h2 id='{esc(s['name'])}'>{esc(s['name'])}: {_verdict(s['pass'])}</h2>"
+            f"<p>{esc(s.get('description', ''))}</p>"
+            f"<p class='meta'>{s['size'][0]}&times;{s['size'][1]}, {s['spp']} spp, max_depth "
+            f"{s['max_depth']}, reference integrator {esc(s['integrator'])}, "
+            f"{sec.get('reference_passes', 1)} reference pass(es)</p>"
+            f"<div class='imgs'>{''.join(figs)}</div>"
+            f"<table><tr><th>check ({esc(s['test'])})</th><th>value vs. limit</th>"
+            f"<th>result</th></tr>{''.join(rows)}</table>"
+            f"<p class='meta'>Why these limits: {esc(s['reason'])}.</p>{dev}"
+            f"<p class='meta'>RMSE {m['rmse']:.3e}, mean rel. {m['mean_rel']:.2e}, max rel. "
+            f"{m['max_rel']:.2e}, FLIP {flip}; seconds: tracer {sec['tracer']:.3f}, Mitsuba "
+            f"{sec['mitsuba']:.3f}" + (f" (Mitsuba / tracer {ratio:.2f})" if ratio else "") +
+            "</p>")
+
+
+def _fresnel_html(report: Report, outdir: Path) -> str:
+    png = (outdir / "fresnel.png").read_bytes()
+    rows = []
+    for f in report.fresnel:
+        ok = f["exact_vs_mitsuba_within_float32"] and f["exact_within_plugin_interval"]
+        crit = "" if f["critical_angle_deg"] is None else f"{f['critical_angle_deg']:.1f}"
+        rows.append(f"<tr><td>{f['ior']:g}</td><td>{f['side']}</td><td>{crit}</td>"
+                    f"<td>{f['max_abs_exact_minus_mitsuba']:.1e} "
+                    f"({f['worst_exact_vs_mitsuba_over_tolerance']:.2f} of tol.)</td>"
+                    f"<td>{f['max_abs_plugin_minus_exact']:.1e} "
+                    f"({f['worst_plugin_deviation_in_half_intervals']:.2f} of half-CI)</td>"
+                    f"<td>{f['max_abs_schlick_minus_exact']:.4f} at "
+                    f"{f['schlick_worst_theta_deg']:.1f}&deg;</td><td>{_verdict(ok)}</td></tr>")
+    return ("<h2 id='fresnel'>Fresnel curves: " + _verdict(report.fresnel_passed) + "</h2>"
+            "<p>Our exact Fresnel reflectance against <code>mi.fresnel</code> (must agree within "
+            "float32 rounding, which near the critical angle is large) and against the "
+            "reflection probability of Mitsuba's <code>dielectric</code> plugin measured by "
+            "sampling (must lie in its binomial interval). Schlick's approximation is shown "
+            "with its error, not checked.</p>"
+            f"<div class='imgs'><figure>{_img(png, 'plot', 'Fresnel curves')}</figure></div>"
+            "<table><tr><th>ior</th><th>side</th><th>critical angle</th><th>exact vs "
+            "mi.fresnel</th><th>plugin vs exact</th><th>Schlick error</th><th>result</th></tr>"
+            + "".join(rows) + "</table>")
+

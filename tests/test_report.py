@@ -1,0 +1,133 @@
+"""`whitted report`: files, schema, a real error caught, and the page in a real browser."""
+
+import json
+import os
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENES, run_cli
+
+from reference.report import build_report, select_scenes
+
+
+def test_quick_report_writes_html_markdown_and_json(tmp_path):
+    r = run_cli("report", "--quick", "--scenes", "sphere_point*", "-o", tmp_path / "rep")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "[1/2] sphere_point" in r.stdout and "fresnel curves" in r.stdout
+    out = tmp_path / "rep"
+    data = json.loads((out / "report.json").read_text())
+    # The schema documented in the README.
+    assert data["pass"] is True and data["quick"] is True
+    assert {"whitted", "mitsuba", "drjit", "backend"} <= set(data["versions"])
+    (s,) = data["scenes"]
+    assert {"name", "pass", "test", "metrics", "seconds", "checks", "reason"} <= set(s)
+    assert s["name"] == "sphere_point" and s["test"] == "exact-strata"
+    assert {"tracer", "mitsuba"} <= set(s["seconds"])
+    assert {"rmse", "median_rel", "frac_over_5pct", "flip"} <= set(s["metrics"])
+    assert len(data["fresnel"]) == 8 and data["fresnel_pass"] is True
+    md = (out / "report.md").read_text()
+    assert md.startswith("# whitted accuracy report: PASS") and "| sphere_point |" in md
+    page = (out / "index.html").read_text()
+    assert page.count("data:image/png;base64,") == 4  # tracer, Mitsuba, diff, Fresnel plot
+
+
+def test_report_refuses_bad_input(tmp_path):
+    r = run_cli("report", "--scenes", "no_such_scene*", "-o", tmp_path / "rep")
+    assert r.returncode == 2 and "no scene" in r.stderr
+    bad = tmp_path / "scenes"
+    bad.mkdir()
+    (bad / "broken.toml").write_text("[camera]\norigin = [0, 0]\n")
+    r = run_cli("report", "--scenes-dir", bad, "-o", tmp_path / "rep2")
+    assert r.returncode == 2 and "camera.origin" in r.stderr
+    assert not (tmp_path / "rep2").exists()
+
+
+def _verdicts(report):
+    return {s["name"]: s["pass"] for s in report.scenes}
+
+
+ALL = select_scenes(SCENES, None)
+GLASS = {p.stem for p in ALL if "dielectric" in p.read_text()}
+
+
+def test_report_fails_exactly_the_glass_scenes_when_fresnel_is_wrong(tmp_path, monkeypatch):
+    # A plausible bug: the s-polarised amplitude forgotten, R = r_p^2 / 2 instead of
+    # (r_s^2 + r_p^2) / 2. Every scene with glass must fail, and the Fresnel curves;
+    # scenes without glass must still pass.
+    import drjit as dr
+
+    from tracer import fresnel
+
+    def wrong(cos_i, eta):
+        c, rel = fresnel._sides(cos_i, eta)
+        cos_t, tir = fresnel.snell_cos_t(cos_i, eta)
+        r_p = (rel * c - cos_t) / (rel * c + cos_t)
+        return dr.select(tir, 1.0, 0.5 * r_p * r_p)
+
+    monkeypatch.setattr(fresnel, "fresnel_exact", wrong)
+    report = build_report(tmp_path, ALL, quick=True, log=lambda *_: None)
+    verdicts = _verdicts(report)
+    assert not report.passed and not report.fresnel_passed
+    assert {n for n, ok in verdicts.items() if not ok} == GLASS, verdicts
+    assert GLASS and len(GLASS) < len(verdicts)
+
+
+def test_report_fails_when_the_camera_is_mirrored(tmp_path, monkeypatch):
+    # Another: the image's x axis flipped (world +x drawn on the left).
+    from tracer import integrator
+    from tracer.camera import generate_rays
+
+    def mirrored(camera, width, height, film_x, film_y):
+        return generate_rays(camera, width, height, width - film_x, film_y)
+
+    monkeypatch.setattr(integrator, "generate_rays", mirrored)
+    picked = [p for p in ALL if p.stem in ("three_lights", "ortho_transforms")]
+    report = build_report(tmp_path, picked, quick=True, log=lambda *_: None, fresnel=False)
+    assert _verdicts(report) == {"ortho_transforms": False, "three_lights": False}
+
+
+def _chromium():
+    for name in ("chromium", "chromium-browser", "google-chrome"):
+        path = shutil.which(name)
+        if path:
+            return path
+    return None
+
+
+CHROMIUM_FLAGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-quic",
+                  "--no-first-run", "--disable-background-networking",
+                  "--disable-component-update", "--disable-sync", "--hide-scrollbars"]
+
+
+def test_report_page_loads_every_image_in_a_real_browser(tmp_path):
+    browser = _chromium()
+    if browser is None:
+        if os.environ.get("WHITTED_REQUIRE_BROWSER"):
+            pytest.fail("chromium is required here (WHITTED_REQUIRE_BROWSER) but missing")
+        pytest.skip("no chromium: `make setup` installs Debian's package where it can")
+    out = tmp_path / "rep"
+    build_report(out, [SCENES / "glass_sphere.toml", SCENES / "three_lights.toml"], quick=True,
+                 log=lambda *_: None)
+    page = (out / "index.html").resolve()
+    n_img = page.read_text().count("<img ")
+    profile = tempfile.mkdtemp()
+    shot = tmp_path / "shot.png"
+    subprocess.run([browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                    "--window-size=1280,2200", f"--screenshot={shot}", page.as_uri()],
+                   capture_output=True, timeout=120, check=False)
+    dom = subprocess.run([browser, *CHROMIUM_FLAGS, f"--user-data-dir={profile}",
+                          "--virtual-time-budget=5000", "--dump-dom", page.as_uri()],
+                         capture_output=True, text=True, timeout=120).stdout
+    # The page's own script counts images that decoded (naturalWidth > 0) after load.
+    assert f'data-images-loaded="{n_img}/{n_img}"' in dom, dom[:300]
+    assert n_img == 7  # 2 scenes x (tracer, Mitsuba, diff) + the Fresnel plot
+    from PIL import Image
+
+    pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=np.float32)
+    assert pixels.shape[0] >= 2000 and pixels.std() > 20  # a page, not a blank screen
+    Path(os.environ.get("WHITTED_SCREENSHOT_DIR", tmp_path)).mkdir(exist_ok=True)
+    shutil.copy(shot, Path(os.environ.get("WHITTED_SCREENSHOT_DIR", tmp_path)) / "report.png")
