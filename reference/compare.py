@@ -26,17 +26,21 @@ differences shrink as 1/sqrt(passes)). As Mitsuba's own render tests do,
 each pixel and channel is tested with z = |tracer - mitsuba| / sqrt(Var),
 where Var is the variance of the reference's pixel mean, estimated from its
 per-sample second moment (E[x^2] - E[x]^2) / N over its N pooled samples,
-plus the tracer's own variance where it samples area lights, plus a float32
-floor (sigma = 1e-4 |value|, the same precision argument
-as above, so that pixels without any randomness are compared to float
-precision). Two-sided p-values are compared with the Sidak-corrected level
+plus, where the tracer samples area lights, the variance of its image, which
+is then the mean of 16 seeds (see :func:`tracer_pooled`), plus a float32
+floor (sigma = 1e-4 |value|, the same precision argument as above, so that
+pixels without any randomness are compared to float precision). Two-sided
+p-values are compared with the Sidak-corrected level
 alpha_pixel = 1 - (1 - 0.01)^(1 / pixels); the test passes when at least
 99.75 % of the pixel-channels pass. Because the estimated per-sample variance
 includes the variation of radiance across a pixel, it bounds the variance of
 stratified means from above, so this test is conservative; the block test
 below guards against differences it would miss: after averaging 4x4 blocks on
 both sides, the median block relative difference must be below 1 % and fewer
-than 2 % of blocks may differ by more than 5 %.
+than 2 % of blocks may differ by more than 5 % (and by more than three
+standard deviations of the two images' noise, so that nearly black blocks,
+where a 1024-sample reference still has several per cent of relative noise,
+do not count as differences of the renderers).
 """
 
 from __future__ import annotations
@@ -141,10 +145,31 @@ def z_test(test: np.ndarray, ref: np.ndarray, ref_var: np.ndarray,
     return ZTest(alpha_pixel, frac, float(p.min()), frac >= pass_fraction, p)
 
 
-def block_metrics(test: np.ndarray, ref: np.ndarray) -> dict:
-    rel = pixel_relative_difference(block_mean(test), block_mean(ref))
+#: A block "differs" only when its difference is also this many standard deviations of
+#: the two estimates' noise (see block_metrics).
+BLOCK_SIGMAS = 3.0
+
+
+def block_metrics(test: np.ndarray, ref: np.ndarray, var: np.ndarray | None = None) -> dict:
+    """Median relative difference of 4x4 blocks, and the fraction of blocks beyond 5 %.
+
+    With ``var`` (the per-pixel variance of test - ref), a block counts as beyond
+    5 % only if its difference also exceeds BLOCK_SIGMAS standard deviations of
+    that noise: in blocks far darker than the image (say 1 % of its mean) a
+    1024-sample reference still carries several per cent of relative noise,
+    and a relative threshold alone would then measure the reference, not the
+    renderers.
+    """
+    bt, br = block_mean(test), block_mean(ref)
+    rel = pixel_relative_difference(bt, br)
+    beyond = rel > 0.05
+    if var is not None:
+        k = BLOCK
+        sigma_block = np.sqrt(block_mean(var).sum(-1) / (k * k))  # Var(mean of k*k pixels)
+        diff = np.abs(bt.astype(np.float64) - br).sum(-1)
+        beyond &= diff > BLOCK_SIGMAS * sigma_block
     return {"block_median_rel": float(np.median(rel)),
-            "block_frac_over_5pct": float((rel > 0.05).mean())}
+            "block_frac_over_5pct": float(beyond.mean())}
 
 
 @dataclass
@@ -179,10 +204,12 @@ def judge(test_name: str, metrics: Metrics, tracer_img, ref_img, ref_var=None,
         z = z_test(tracer_img, ref_img, ref_var, tracer_var)
         checks["z_fraction_passed"] = {"value": z.fraction_passed, "limit": ZTEST_PASS_FRACTION,
                                        "pass": z.passed, "alpha_pixel": z.alpha_pixel}
-        for k, v in block_metrics(tracer_img, ref_img).items():
+        noise = ref_var.astype(np.float64) + (0 if tracer_var is None else tracer_var)
+        for k, v in block_metrics(tracer_img, ref_img, noise).items():
             check(k, v, BLOCK_LIMITS[k])
         reason = ("Mitsuba samples one lobe / light point per sample: per-pixel z-test "
-                  "(Sidak alpha 0.01, >= 99.75 % pass) and 4x4-block relative differences")
+                  "(Sidak alpha 0.01, >= 99.75 % pass) and 4x4-block relative differences "
+                  "(beyond 5 % and 3 sigma of the noise)")
     passed = all(c["pass"] for c in checks.values())
     return Verdict(test_name, passed, checks, reason), z
 
@@ -254,6 +281,35 @@ def ztest_passes(spp: int) -> int:
     return -(-ZTEST_SAMPLES // spp)
 
 
+#: Tracer renders (seeds) pooled where the tracer samples area lights.
+TRACER_SEEDS = 16
+
+
+def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndarray]:
+    """Mean of ``seeds`` tracer renders and the variance of that mean.
+
+    Where the tracer samples area lights its image is random. The comparison
+    then tests its expectation, estimated by the mean of renders with seeds
+    0..seeds-1 (the same strata, independent light samples: as one render
+    with seeds x spp samples), and the variance of that mean comes from the
+    per-sample second moment pooled over all of them, (E[x^2] - E[x]^2) /
+    (seeds x spp). One render's spp samples alone give too noisy a variance
+    for a Sidak-corrected test (measured: 99.65 % of pixels passing on the
+    Heckbert scene, against 100 % with 16 seeds).
+    """
+    from tracer.integrator import Integrator
+
+    m1 = m2 = 0.0
+    spp = scene.film.strata ** 2
+    for k in range(seeds):
+        r = Integrator(scene, seed=k).render(moments=True)
+        mean = r.image.astype(np.float64)
+        m1 = m1 + mean / seeds
+        m2 = m2 + (r.variance.astype(np.float64) * spp + mean ** 2) / seeds
+    var = np.maximum(m2 - m1 ** 2, 0) / (spp * seeds)
+    return m1.astype(np.float32), var.astype(np.float32)
+
+
 def comparable(scene):
     """The scene with its declared tracer-only parts replaced by what Mitsuba models.
 
@@ -297,12 +353,14 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     tracer_random = needs_var and scene.has_area_lights()
     integ = Integrator(scene)
     integ.render()  # warm-up: compiles the kernels, so that both sides are timed warm
-    tr = integ.render(progress, moments=tracer_random)
+    tr = integ.render(progress)
     if passes is None:
         passes = ztest_passes(scene.film.strata ** 2) if needs_var else 1
     ref = render_reference(scene, integrator, moments=needs_var and integrator == "whitted",
                            passes=passes)
-    tracer_var = tr.variance if tracer_random else None
+    tracer_var = None
+    if tracer_random:
+        tr.image, tracer_var = tracer_pooled(scene)
     metrics = image_metrics(tr.image, ref.image)
     ref_var = ref.variance
     if needs_var and ref_var is None:
@@ -317,7 +375,10 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
         reason += ("; tracer-only parts (" + ", ".join(full_scene.tracer_only) +
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
                    "the expected deviation")
-    elif full_scene.uses_schlick():
+    if tracer_random:
+        reason += (f"; the tracer samples area lights, so its image is the mean of "
+                   f"{TRACER_SEEDS} seeds")
+    if scene is full_scene and full_scene.uses_schlick():
         reason += ("; this scene uses Schlick Fresnel, which Mitsuba does not model: declare "
                    "[compare] tracer_only = [\"schlick\"] to check the rest")
     result = Comparison(

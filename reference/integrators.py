@@ -29,8 +29,11 @@ round(R spp + 1/2) of spp samples instead of R spp on average, in every pass
 and with every seed (with R = 0.0083 and 64 spp: in 1 of 64, 1.9 times too
 often). So the Mitsuba sampler places the pixel sample only; the lobe choices
 and light samples of this integrator come from a PCG32 stream per sample,
-seeded by a hash of the sample's camera ray and of one value of the sampler
-(which differs between seeds), so passes with different seeds are independent.
+seeded by a hash of the sample's camera ray, of one value of the sampler
+(which tells a pixel's samples apart even where their rays coincide) and of
+``pass_seed``, which the harness sets to each pass's seed: without it a
+sample position would see only as many distinct streams as the sampler has
+strata, whatever the seed, and pooled passes would not be independent.
 """
 
 from __future__ import annotations
@@ -46,19 +49,21 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         super().__init__(props)
         self.max_depth = int(props.get("max_depth", 6))
         self.moments = bool(props.get("moments", False))
+        self.pass_seed = int(props.get("seed", 0))
         if self.max_depth < 1:
             raise ValueError("whitted: max_depth must be >= 1")
 
     def aov_names(self):
         return ["m2.R", "m2.G", "m2.B"] if self.moments else []
 
-    @staticmethod
-    def _stream(sampler, ray):
+    def _stream(self, sampler, ray):
         """A PCG32 stream per sample (see the module docstring)."""
         def bits(x):
             return dr.reinterpret_array(mi.UInt32, x)
 
-        key = bits(sampler.next_1d())
+        # Opaque, so that every pass reuses the same compiled kernel.
+        seed = dr.opaque(mi.UInt32, _mix_int(self.pass_seed))
+        key = _mix(bits(sampler.next_1d()) ^ seed)
         for c in (ray.o.x, ray.o.y, ray.o.z, ray.d.x, ray.d.y, ray.d.z):
             key = _mix(key ^ bits(c))
         width = dr.width(key)
@@ -112,6 +117,15 @@ class WhittedIntegrator(mi.SamplingIntegrator):
 
     def to_string(self):
         return f"WhittedIntegrator[max_depth={self.max_depth}]"
+
+
+def _mix_int(x: int) -> int:
+    """The same hash on a Python integer (32 bits)."""
+    x &= 0xFFFFFFFF
+    for shift, mul in ((16, 0x85EBCA6B), (13, 0xC2B2AE35)):
+        x ^= x >> shift
+        x = (x * mul) & 0xFFFFFFFF
+    return x ^ (x >> 16)
 
 
 def _mix(x):

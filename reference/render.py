@@ -53,7 +53,10 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     total = 0.0
     warm = []
     mean = m2 = None
+    integ = ms.integrator()
     for k in range(passes):
+        if hasattr(integ, "pass_seed"):  # our integrator's own random stream
+            integ.pass_seed = seed + k
         start = time.perf_counter()
         out = np.asarray(mi.render(ms, seed=seed + k, spp=spp), dtype=np.float64)
         elapsed = time.perf_counter() - start
@@ -65,6 +68,8 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
         if with_moments:
             m2 = out[..., -3:] / passes if m2 is None else m2 + out[..., -3:] / passes
     if not warm:  # one pass: time a second, warm one (its image is not used)
+        if hasattr(integ, "pass_seed"):
+            integ.pass_seed = seed + 1
         start = time.perf_counter()
         np.asarray(mi.render(ms, seed=seed + 1, spp=spp))
         warm.append(time.perf_counter() - start)

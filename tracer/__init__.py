@@ -21,11 +21,15 @@ from tracer.scene import Scene, load_scene  # noqa: E402
 __version__ = "0.1.0"
 
 
-def render(scene, progress=None):
-    """Render a :class:`~tracer.scene.Scene`; return a :class:`~tracer.integrator.RenderResult`."""
+def render(scene, progress=None, seed=0, lpe=None):
+    """Render a :class:`~tracer.scene.Scene`; return a :class:`~tracer.integrator.RenderResult`.
+
+    ``lpe`` keeps only the light on paths matching a light-path expression such
+    as ``"LDS+E"`` (Heckbert's notation, written from the light to the eye).
+    """
     from tracer.integrator import render as _render
 
-    return _render(scene, progress)
+    return _render(scene, progress, seed, lpe)
 
 
 __all__ = ["Scene", "SceneError", "UserError", "load_scene", "render", "__version__"]

@@ -92,14 +92,16 @@ class _Batch:
     pixel: object   # global pixel index
     s: object       # sample index within the pixel
     slot: object    # index of the sample in the chunk's radiance buffer
+    state: object = None  # light-path-expression DFA state (only with an expression)
 
-    FIELDS = ("o", "d", "tmax", "weight", "pixel", "s", "slot")
+    FIELDS = ("o", "d", "tmax", "weight", "pixel", "s", "slot", "state")
 
     def size(self) -> int:
         return dr.width(self.slot)
 
     def gather(self, index) -> _Batch:
-        return _Batch(*(dr.gather(type(getattr(self, f)), getattr(self, f), index)
+        return _Batch(*(None if getattr(self, f) is None else
+                        dr.gather(type(getattr(self, f)), getattr(self, f), index)
                         for f in self.FIELDS))
 
     def split(self, cap: int) -> list[_Batch]:
@@ -119,7 +121,9 @@ def _concat(parts: list[_Batch]) -> _Batch | None:
     for f in _Batch.FIELDS:
         vals = [getattr(p, f) for p in parts]
         t = type(vals[0])
-        if dr.size_v(t) == 3:
+        if vals[0] is None:
+            out.append(None)
+        elif dr.size_v(t) == 3:
             out.append(t(*(dr.concat([v[k] for v in vals]) for k in range(3))))
         else:
             out.append(dr.concat(vals))
@@ -247,10 +251,19 @@ class _AreaLight:
 class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
-    def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None):
+    def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
+                 lpe: str | None = None):
         backend.use()
         self.scene = scene
         self.seed = seed
+        self.dfa = None
+        if lpe is not None:
+            from tracer.lpe import ALPHABET, compile_lpe
+
+            self.dfa = compile_lpe(lpe)
+            self.dfa_trans = jit.UInt32([t for row in self.dfa.transitions for t in row])
+            self.dfa_accept = jit.Bool(list(self.dfa.accepting))
+            self._letter = {c: i for i, c in enumerate(ALPHABET)}
         self.geo = Geometry(scene)
         self.mat = _Materials(scene)
         self.delta_lights = [_DeltaLight(light) for light in scene.lights]
@@ -275,7 +288,10 @@ class Integrator:
 
         if self.area_lights:
             le = dr.gather(jit.Array3f, geo.radiance, hit.prim, valid)
-            contrib += dr.select(valid & (cos_o > 0), b.weight * le, 0)
+            seen = valid & (cos_o > 0)
+            if self.dfa is not None:  # the light is the path's L: ... E + L
+                seen &= self._accepts(self._step(b.state, "L"))
+            contrib += dr.select(seen, b.weight * le, 0)
 
         children = None
         shadow_masks = []
@@ -287,6 +303,8 @@ class Integrator:
             off = spawn_offset(p)
             p_front = dr.fma(ns, off, p)
             diffuse = valid & (kind == DIFFUSE)
+            if self.dfa is not None:  # direct light at a diffuse vertex: ... E + D + L
+                diffuse &= self._accepts(self._step(self._step(b.state, "D"), "L"))
             f = refl * (1 / math.pi)
             sources = [(light, None) for light in self.delta_lights]
             sources += [(light, stratified_2d(b.pixel, b.s, scene.film.strata,
@@ -310,8 +328,9 @@ class Integrator:
             dr.eval(L, *shadow_masks)      # one kernel: intersection, shading, shadow rays
             return None, _count(shadow_masks)
         refl_b, refr_b, keep_r, keep_t = children
+        extra = () if refl_b.state is None else (refl_b.state,)
         dr.eval(L, *shadow_masks, refl_b.o, refl_b.d, refl_b.weight,
-                refr_b.o, refr_b.d, refr_b.weight, keep_r, keep_t)
+                refr_b.o, refr_b.d, refr_b.weight, keep_r, keep_t, *extra)
         nxt = _concat([refl_b.gather(dr.compress(keep_r)), refr_b.gather(dr.compress(keep_t))])
         return nxt, _count(shadow_masks)
 
@@ -331,9 +350,22 @@ class Integrator:
         w_refr = dr.select(glass & ~tir, b.weight * ((1 - r) * n_ratio * n_ratio), 0)
         r_dir = fresnel.reflect(b.d, n)
         far = dr.full(jit.Float, dr.inf, b.size())
-        refl_b = _Batch(dr.fma(ns, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot)
-        refr_b = _Batch(dr.fma(ns, -off, p), t_dir, far, w_refr, b.pixel, b.s, b.slot)
+        state = None
+        if self.dfa is not None:  # a specular vertex: ... + S; dead states carry nothing
+            state = self._step(b.state, "S")
+            alive = state != 0
+            w_refl = dr.select(alive, w_refl, 0)
+            w_refr = dr.select(alive, w_refr, 0)
+        refl_b = _Batch(dr.fma(ns, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot, state)
+        refr_b = _Batch(dr.fma(ns, -off, p), t_dir, far, w_refr, b.pixel, b.s, b.slot, state)
         return refl_b, refr_b, dr.max(w_refl) > 0, dr.max(w_refr) > 0
+
+    def _step(self, state, letter: str):
+        return dr.gather(jit.UInt32, self.dfa_trans, state * len(self._letter) +
+                         self._letter[letter])
+
+    def _accepts(self, state):
+        return dr.gather(jit.Bool, self.dfa_accept, state)
 
     # ------------------------------------------------------------------ the image
 
@@ -359,7 +391,10 @@ class Integrator:
             L = dr.zeros(jit.Array3f, count * spp)
             slot = dr.arange(jit.UInt32, count * spp)
             ones = dr.full(jit.Array3f, 1.0, count * spp)
-            stack = [(1, _Batch(o, d, tmax, ones, pixel, s, slot))]
+            state = None
+            if self.dfa is not None:  # every path ends at the eye: read E first
+                state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), count * spp)
+            stack = [(1, _Batch(o, d, tmax, ones, pixel, s, slot, state))]
             while stack:
                 depth, batch = stack.pop()
                 rays[depth - 1] += batch.size()
@@ -386,6 +421,10 @@ class Integrator:
 
 
 def render(scene: Scene, progress: Callable[[int, int], None] | None = None,
-           seed: int = 0) -> RenderResult:
-    """Render a validated scene with the tracer (two lines from Python: load, render)."""
-    return Integrator(scene, seed=seed).render(progress)
+           seed: int = 0, lpe: str | None = None) -> RenderResult:
+    """Render a validated scene with the tracer (two lines from Python: load, render).
+
+    ``lpe``: only the light on paths matching this light-path expression
+    (see :mod:`tracer.lpe`), e.g. ``"LDS+E"``.
+    """
+    return Integrator(scene, seed=seed, lpe=lpe).render(progress)
