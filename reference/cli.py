@@ -109,15 +109,25 @@ def cmd_render(args) -> int:
     from tracer.imageio import check_output_path, write_image
 
     out = check_output_path(args.output)
+    if args.lpe is not None:
+        from tracer.lpe import compile_lpe
+
+        compile_lpe(args.lpe)  # refuse a bad expression before anything renders
     scene = load(args)
     _note_spp(scene)
     name = _backend(args)
     from tracer.integrator import Integrator
 
-    result = Integrator(scene, seed=args.seed).render(Progress(f"render {scene.name}"))
+    if not args.min_weight >= 0:
+        from tracer.errors import UserError
+
+        raise UserError(f"--min-weight: expected a number >= 0, got {args.min_weight}")
+    result = Integrator(scene, seed=args.seed, lpe=args.lpe, min_weight=args.min_weight).render(
+        Progress(f"render {scene.name}"))
     write_image(out, result.image)
     rays = ", ".join(str(r) for r in result.rays_per_level)
-    print(f"wrote {out} ({_describe(scene)}, {name}) in {result.seconds:.3f} s; "
+    only = f", only paths {args.lpe}" if args.lpe else ""
+    print(f"wrote {out} ({_describe(scene)}, {name}{only}) in {result.seconds:.3f} s; "
           f"rays per level: {rays}; shadow rays: {sum(result.shadow_rays_per_level)}")
     return EXIT_OK
 
@@ -276,6 +286,77 @@ def cmd_report(args) -> int:
     return EXIT_OK if report.passed else EXIT_FAIL
 
 
+def cmd_depth_sweep(args) -> int:
+    from reference.depth_sweep import depth_sweep, explain, parse_depths, write_outputs
+    from tracer.errors import UserError
+
+    depths = parse_depths(args.depths)
+    if args.repeat < 1:
+        raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
+    out = Path(args.output)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: exists and is not a folder")
+    scene = load(args)
+    _note_spp(scene)
+    _backend(args)
+    print(f"depth sweep of {scene.name} ({_describe(scene).rsplit(',', 1)[0]}), DEPTH "
+          f"{', '.join(map(str, depths))}, {args.repeat} timed run(s) each", flush=True)
+    rows = depth_sweep(scene, depths, args.repeat, out, mitsuba=not args.no_mitsuba,
+                       log=lambda m: print(m, flush=True), min_weight=args.min_weight)
+    files = write_outputs(rows, out, scene.name)
+    print(explain(rows))
+    print("wrote " + ", ".join(str(f) for f in files) + f" and depth_*.png in {out}")
+    return EXIT_OK
+
+
+def cmd_paths(args) -> int:
+    from tracer.errors import UserError
+
+    out = Path(args.output)
+    if out.suffix.lower() != ".png":
+        raise UserError(f"{out}: expected a .png file name")
+    if not (out.parent if str(out.parent) else Path(".")).is_dir():
+        raise UserError(f"{out}: folder {out.parent} does not exist")
+    scene = load(args)
+    from reference.paths import (
+        WANTED,
+        draw,
+        ldde_lsde_panel,
+        parse_pixel,
+        pick_pixels,
+        ray_trees,
+    )
+
+    pixels = [parse_pixel(p, scene.film.width, scene.film.height) for p in args.pixel or []]
+    _backend(args)
+    from tracer.integrator import Integrator
+
+    notes = []
+    if not pixels:
+        picked = pick_pixels(scene)
+        for expr in WANTED:
+            if picked[expr] is None:
+                why = (" (a point, spot or directional light cannot be seen: only area "
+                       "lights can)" if expr in ("LE", "LSE") else "")
+                notes.append(f"{expr}: no pixel of this scene shows it{why}.")
+            else:
+                notes.append(f"{expr}: pixel {picked[expr][0]},{picked[expr][1]}.")
+        pixels = sorted({p for p in picked.values() if p is not None})
+    notes.append("LDDE and LSDE: a Whitted tracer makes no such paths (no indirect diffuse "
+                 "light, no caustics): see the right panel.")
+    image = Integrator(scene).render().image
+    trees = ray_trees(scene, pixels)
+    panel = None if args.no_mitsuba else ldde_lsde_panel(scene)
+    draw(scene, image, trees, str(out), notes, panel)
+    for t in trees:
+        print(f"pixel {t.pixel[0]},{t.pixel[1]}: " +
+              (", ".join(sorted(set(t.paths), key=lambda s: (len(s), s))) or "no light"))
+    for n in notes:
+        print(n)
+    print(f"wrote {out}")
+    return EXIT_OK
+
+
 def cmd_scenes(args) -> int:
     from tracer import load_scene
 
@@ -316,6 +397,13 @@ def build_parser() -> argparse.ArgumentParser:
                        description="Render SCENE with whitted's own tracer.")
     scene_opts(r, "output image: .exr (linear float32), .png (sRGB 8-bit) or .ppm "
                   "(plain text, as Heckbert's minray prints it)")
+    r.add_argument("--lpe", metavar="EXPR", default=None,
+                   help="render only light on paths matching this light-path expression in "
+                        "Heckbert's notation, written from the light to the eye: L light, "
+                        "D diffuse, S specular, E eye; e.g. LDE, 'LDS+E', 'LS*E', 'L(D|S)*E'")
+    r.add_argument("--min-weight", type=float, default=0.0,
+                   help="drop specular branches whose weight falls to this or below (a biased "
+                        "speed-up; default 0: exact Whitted)")
     r.set_defaults(func=cmd_render)
 
     ref = sub.add_parser("reference", help="render a scene on Mitsuba 3",
@@ -384,6 +472,36 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     rp.set_defaults(func=cmd_report)
+
+    ds = sub.add_parser("depth-sweep", help="runtime and rays against recursion depth",
+                        description="Render SCENE at each DEPTH (Heckbert's numbering: "
+                                    "max_depth = DEPTH + 1), timing the tracer (median of "
+                                    "--repeat runs after a warm-up) and Mitsuba's reference; "
+                                    "write depth_NN.png, runtimes.txt and runtimes.png.")
+    scene_opts(ds, "output folder")
+    ds.add_argument("--depths", default="1-5,10,20,25",
+                    help="DEPTH values: numbers and ranges (default: 1-5,10,20,25)")
+    ds.add_argument("--repeat", type=int, default=3, help="timed runs per depth (default 3)")
+    ds.add_argument("--no-mitsuba", action="store_true", help="do not time Mitsuba alongside")
+    ds.add_argument("--min-weight", type=float, default=0.0,
+                    help="drop branches whose weight falls to this or below (biased; default "
+                         "0: exact Whitted, only zero-weight branches are dropped)")
+    ds.set_defaults(func=cmd_depth_sweep)
+
+    pa = sub.add_parser("paths", help="draw pixels' ray trees with their light paths",
+                        description="Draw, over the rendered image, the ray trees of chosen "
+                                    "pixels (camera ray, reflections, refractions, shadow rays "
+                                    "to each light), each light path labelled in Heckbert's "
+                                    "notation. Without --pixel, pixels that show LE, LDE, LSE "
+                                    "and LDSE are picked. Beside it, where Mitsuba's path "
+                                    "tracer finds LDDE and LSDE paths, which a Whitted tracer "
+                                    "cannot make.")
+    scene_opts(pa, "output .png")
+    pa.add_argument("--pixel", action="append", metavar="X,Y",
+                    help="a pixel to draw (repeatable); default: picked automatically")
+    pa.add_argument("--no-mitsuba", action="store_true",
+                    help="leave out the LDDE/LSDE panel rendered on Mitsuba")
+    pa.set_defaults(func=cmd_paths)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)

@@ -140,6 +140,8 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         result, tracer_img, ref_img = compare_scene(scene, work / scene.name)
         entry = scene_entry(result)
         entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
+        if scene.has_specular() or scene.has_area_lights():
+            entry["light_paths"], entry["images"]["light_paths"] = light_paths(scene)
         report.scenes.append(entry)
         report.passed &= result.passed
         log(f"[{i}/{total}] {scene.name:<20} {result.test:<13} "
@@ -163,6 +165,26 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     return report
 
 
+#: Heckbert's expressions that partition a Whitted tracer's paths.
+PARTITION = ("LE", "LDE", "LS+E", "LDS+E")
+
+
+def light_paths(scene) -> tuple[dict, dict]:
+    """The image split by light path: each part's share of the light, and its picture.
+
+    The four expressions partition every path a Whitted tracer makes, so the
+    parts sum to the full render; the largest deviation of that sum is kept.
+    """
+    from tracer.integrator import Integrator
+
+    full = Integrator(scene).render().image
+    parts = {e: Integrator(scene, lpe=e).render().image for e in PARTITION}
+    total = float(full.sum()) or 1.0
+    shares = {e: float(img.sum()) / total for e, img in parts.items()}
+    shares["sum_minus_full_max_abs"] = float(np.abs(sum(parts.values()) - full).max())
+    return shares, {e: _png_bytes(img) for e, img in parts.items()}
+
+
 def scene_entry(c) -> dict:
     """A scene's record in report.json (schema in the README)."""
     d = c.to_json()
@@ -171,6 +193,7 @@ def scene_entry(c) -> dict:
             "seconds": d["seconds"], "size": d["size"], "spp": d["spp"],
             "max_depth": d["max_depth"], "integrator": d["integrator"],
             "backend": d["backend"], "description": d["description"],
+            "light_paths": None,
             "tracer_only": d["tracer_only"], "expected_deviation": d["expected_deviation"],
             "files": d["files"]}
 
@@ -267,6 +290,7 @@ th { background: #f4f4f6; }
 .imgs figure { margin: 0; } .imgs figcaption { font-size: 12px; color: #555; }
 .imgs img.render { width: 320px; image-rendering: pixelated; border: 1px solid #ccc; }
 .imgs img.map { height: 270px; }
+.imgs img.lpe { width: 200px; image-rendering: pixelated; border: 1px solid #ccc; }
 .meta { color: #555; font-size: 12px; } code { background: #f4f4f6; padding: 0 3px; }
 """
 
@@ -369,6 +393,17 @@ def _scene_html(s: dict, report: Report) -> str:
                f"{100 * e.get('frac_over_5pct', 0):.2f} %, image means differ by "
                f"{100 * e.get('mean_rel_diff', 0):.2f} %. Not a failure: Mitsuba has no "
                "counterpart; the check above uses Mitsuba's equivalent.</p>")
+    lp = ""
+    if "light_paths" in imgs:
+        shares = s.get("light_paths", {})
+        lp_figs = "".join(
+            f"<figure>{_img(data, 'lpe', expr)}<figcaption><code>{esc(expr)}</code>: "
+            f"{100 * shares.get(expr, 0):.1f} % of the light</figcaption></figure>"
+            for expr, data in imgs["light_paths"].items())
+        lp = ("<p>Light paths (Heckbert's notation, from the light to the eye): the tracer's "
+              "image split by <code>whitted render --lpe</code>; the parts sum to the full "
+              f"image (largest difference {shares.get('sum_minus_full_max_abs', 0):.1e}).</p>"
+              f"<div class='imgs'>{lp_figs}</div>")
     return (f"<h2 id='{esc(s['name'])}'>{esc(s['name'])}: {_verdict(s['pass'])}</h2>"
             f"<p>{esc(s.get('description', ''))}</p>"
             f"<p class='meta'>{s['size'][0]}&times;{s['size'][1]}, {s['spp']} spp, max_depth "
@@ -381,7 +416,7 @@ def _scene_html(s: dict, report: Report) -> str:
             f"<p class='meta'>RMSE {m['rmse']:.3e}, mean rel. {m['mean_rel']:.2e}, max rel. "
             f"{m['max_rel']:.2e}, FLIP {flip}; seconds: tracer {sec['tracer']:.3f}, Mitsuba "
             f"{sec['mitsuba']:.3f}" + (f" (Mitsuba / tracer {ratio:.2f})" if ratio else "") +
-            "</p>")
+            "</p>" + lp)
 
 
 def _fresnel_html(report: Report, outdir: Path) -> str:

@@ -32,7 +32,8 @@ def test_quick_report_writes_html_markdown_and_json(tmp_path):
     md = (out / "report.md").read_text()
     assert md.startswith("# whitted accuracy report: PASS") and "| sphere_point |" in md
     page = (out / "index.html").read_text()
-    assert page.count("data:image/png;base64,") == 4  # tracer, Mitsuba, diff, Fresnel plot
+    # tracer, Mitsuba, diff, Fresnel plot (no light-path split: no glass, mirror or area light)
+    assert page.count("data:image/png;base64,") == 4
 
 
 def test_report_refuses_bad_input(tmp_path):
@@ -124,7 +125,8 @@ def test_report_page_loads_every_image_in_a_real_browser(tmp_path):
                          capture_output=True, text=True, timeout=120).stdout
     # The page's own script counts images that decoded (naturalWidth > 0) after load.
     assert f'data-images-loaded="{n_img}/{n_img}"' in dom, dom[:300]
-    assert n_img == 7  # 2 scenes x (tracer, Mitsuba, diff) + the Fresnel plot
+    # 2 scenes x (tracer, Mitsuba, diff), the glass scene's 4 light-path images, Fresnel plot
+    assert n_img == 11
     from PIL import Image
 
     pixels = np.asarray(Image.open(shot).convert("RGB"), dtype=np.float32)

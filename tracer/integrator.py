@@ -65,6 +65,10 @@ from tracer.shapes import sphere as sphere_f
 #: (for area lights) never counts as an occluder.
 SHADOW_EPSILON = 1e-3
 
+#: A ray "still matters" in the statistics when its weight exceeds this: it can then
+#: change its pixel by more than 0.1 % of the light it finds.
+SIGNIFICANT_WEIGHT = 1e-3
+
 
 @dataclass
 class RenderResult:
@@ -74,6 +78,8 @@ class RenderResult:
     seconds: float = 0.0
     rays_per_level: list[int] = field(default_factory=list)
     shadow_rays_per_level: list[int] = field(default_factory=list)
+    #: rays per level whose weight (in any channel) exceeds SIGNIFICANT_WEIGHT
+    significant_rays_per_level: list[int] = field(default_factory=list)
     #: with ``moments``: variance of each pixel mean, (E[x^2] - E[x]^2) / spp
     variance: np.ndarray | None = None
 
@@ -227,7 +233,8 @@ class _AreaLight:
             outside = dc > self.radius
             sin2_max = dr.minimum((self.radius * self.radius) / (dc * dc), 1)
             cos_max = dr.sqrt(1 - sin2_max)
-            x, y, z, pdf = lights.sample_cone(sample, cos_max)
+            # 1 - cos_max without cancellation, for small and distant spheres
+            x, y, z, pdf = lights.sample_cone(sample, cos_max, sin2_max / (1 + cos_max))
             w = to_c / dc
             t1, t2 = lights.coordinate_system(w)
             wi = dr.normalize(x * t1 + y * t2 + z * w)
@@ -252,10 +259,13 @@ class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
-                 lpe: str | None = None):
+                 lpe: str | None = None, min_weight: float = 0.0):
         backend.use()
         self.scene = scene
         self.seed = seed
+        #: Branches whose weight is at most this are dropped. 0 (exact Whitted) drops only
+        #: zero-weight branches; a positive value is a biased speed-up.
+        self.min_weight = float(min_weight)
         self.dfa = None
         if lpe is not None:
             from tracer.lpe import ALPHABET, compile_lpe
@@ -358,7 +368,8 @@ class Integrator:
             w_refr = dr.select(alive, w_refr, 0)
         refl_b = _Batch(dr.fma(ns, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot, state)
         refr_b = _Batch(dr.fma(ns, -off, p), t_dir, far, w_refr, b.pixel, b.s, b.slot, state)
-        return refl_b, refr_b, dr.max(w_refl) > 0, dr.max(w_refr) > 0
+        return (refl_b, refr_b, dr.max(w_refl) > self.min_weight,
+                dr.max(w_refr) > self.min_weight)
 
     def _step(self, state, letter: str):
         return dr.gather(jit.UInt32, self.dfa_trans, state * len(self._letter) +
@@ -383,6 +394,7 @@ class Integrator:
         second = np.zeros((total, 3), dtype=np.float32) if moments else None
         rays = [0] * max_depth
         shadow = [0] * max_depth
+        significant = [0] * max_depth
         start = time.perf_counter()
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
@@ -398,6 +410,8 @@ class Integrator:
             while stack:
                 depth, batch = stack.pop()
                 rays[depth - 1] += batch.size()
+                significant[depth - 1] += int(dr.count(dr.max(batch.weight) >
+                                                       SIGNIFICANT_WEIGHT)[0])
                 nxt, n_shadow = self._level(batch, depth, L)
                 shadow[depth - 1] += n_shadow
                 if nxt is not None and depth < max_depth:
@@ -417,7 +431,8 @@ class Integrator:
             variance = (np.maximum(second - image.astype(np.float64) ** 2, 0) / spp)
             variance = variance.astype(np.float32).reshape(H, W, 3)
         return RenderResult(image.reshape(H, W, 3), spp, seconds, rays,
-                            shadow[:len(rays)] if rays else [], variance)
+                            shadow[:len(rays)] if rays else [], significant[:len(rays)],
+                            variance)
 
 
 def render(scene: Scene, progress: Callable[[int, int], None] | None = None,

@@ -88,13 +88,28 @@ def sample_triangle(sample, p0, e1, e2):
     return p0 + (1 - su) * e1 + (sample.y * su) * e2
 
 
-def sample_cone(sample, cos_max):
-    """Local direction uniform in the cone around +z with cos(theta) >= cos_max, and its pdf."""
-    cos_t = (1 - sample.x) + sample.x * cos_max
-    sin_t = dr.sqrt(dr.maximum(1 - cos_t * cos_t, 0))
+def sample_sphere_uniform(sample, center, radius):
+    """Uniform point on a whole sphere (pdf 1 / (4 pi r^2) by area) and its outward normal."""
+    z = 1 - 2 * sample.x
+    r = dr.sqrt(dr.maximum(1 - z * z, 0))
+    s, c = dr.sincos(2 * math.pi * sample.y)
+    n = type(center)(c * r, s * r, z)
+    return center + radius * n, n
+
+
+def sample_cone(sample, cos_max, one_minus_cos_max=None):
+    """Local direction uniform in the cone around +z with cos(theta) >= cos_max, and its pdf.
+
+    The pdf is 1 / (2 pi (1 - cos_max)): the cone's solid angle. For a small or
+    distant light 1 - cos_max suffers cancellation in float32; pass it computed
+    stably, e.g. sin^2(theta_max) / (1 + cos_max).
+    """
+    omc = (1 - cos_max) if one_minus_cos_max is None else one_minus_cos_max
+    cos_t = 1 - sample.x * omc
+    sin_t = dr.sqrt(dr.maximum((1 - cos_t) * (1 + cos_t), 0))
     phi = 2 * math.pi * sample.y
     s, c = dr.sincos(phi)
-    pdf = 1 / (2 * math.pi * (1 - cos_max))
+    pdf = 1 / (2 * math.pi * omc)
     return c * sin_t, s * sin_t, cos_t, pdf
 
 
