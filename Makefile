@@ -6,7 +6,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: setup report report-quick test browser lint bench clean
+.PHONY: setup report report-quick test browser lint bench bench-mesh clean
 
 ## setup: the virtual environment with whitted and its pinned dependencies, plus Chromium
 setup: $(STAMP) browser
@@ -45,6 +45,10 @@ lint: $(STAMP)
 ## bench: tracer against Mitsuba's direct integrator, timed in one run
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_direct.py
+
+## bench-mesh: the BVH against Mitsuba's Embree on a 144,000-triangle mesh
+bench-mesh: $(STAMP)
+	$(BIN)/python benchmarks/bench_mesh.py
 
 clean:
 	rm -rf $(VENV) reports/*.html reports/*.md reports/*.json reports/*.png reports/scenes out

@@ -18,6 +18,9 @@ def mitsuba():
     variant = backend.mitsuba_variant()
     if mi.variant() != variant:
         mi.set_variant(variant)
-    from reference import integrators  # noqa: F401  (registers the `whitted` integrator)
+    from reference import (
+        integrators,  # noqa: F401  (registers the `whitted` integrator)
+        phong_bsdf,  # noqa: F401  (registers the `whitted_phong` BSDF)
+    )
 
     return mi

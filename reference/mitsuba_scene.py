@@ -18,6 +18,14 @@ point / spot              ``point`` / ``spot`` (``to_world`` = look_at)
 directional               ``directional`` with ``direction``
 sphere / rectangle        ``sphere`` / ``rectangle`` with ``to_world``
 triangle                  a one-face mesh (``obj`` file in XML)
+disk / cylinder           ``disk`` / ``cylinder`` with ``to_world``
+polygon                   a mesh by ear clipping, uvs = the plane's coordinates
+paraboloid                a smooth mesh (exact normals at the vertices), fine
+                          enough that its chords stay within 1e-4 of its size
+mesh                      ``obj`` / ``ply`` with ``face_normals = !smooth``
+instance + groups         ``shapegroup`` + ``instance``
+phong                     ``twosided`` ``whitted_phong`` (reference/phong_bsdf.py)
+checkerboard              ``checkerboard`` with ``to_uv`` a scale
 emitter                   ``area`` with ``radiance``
 integrator                ``whitted`` (reference/integrators.py)
 ========================  ===================================================
@@ -25,6 +33,7 @@ integrator                ``whitted`` (reference/integrators.py)
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -32,11 +41,19 @@ import numpy as np
 
 from tracer import transform as tf
 from tracer.scene import (
+    Checkerboard,
+    Cylinder,
     Dielectric,
     Diffuse,
     DirectionalLight,
+    Disk,
+    Instance,
+    Mesh,
     Mirror,
+    Paraboloid,
+    Phong,
     PointLight,
+    Polygon,
     Rectangle,
     Scene,
     Sphere,
@@ -58,12 +75,26 @@ def _matrix(m) -> tuple:
     return ("matrix", tuple(tuple(float(x) for x in row) for row in np.asarray(m)))
 
 
+def texture_tree(tex) -> dict:
+    if isinstance(tex, Checkerboard):
+        return {"type": "checkerboard", "color0": _rgb(tex.color0), "color1": _rgb(tex.color1),
+                "to_uv": ("uvscale", tex.scale)}
+    return _rgb(tex)
+
+
 def bsdf_tree(material) -> dict:
     if material is None:  # a pure emitter reflects nothing
         return {"type": "twosided", "material": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))}}
     if isinstance(material, Diffuse):
         return {"type": "twosided",
-                "material": {"type": "diffuse", "reflectance": _rgb(material.reflectance)}}
+                "material": {"type": "diffuse", "reflectance": texture_tree(material.reflectance)}}
+    if isinstance(material, Phong):
+        # The ambient term is tracer-only: Mitsuba has no counterpart (see [compare]).
+        return {"type": "twosided",
+                "material": {"type": "whitted_phong", "diffuse": texture_tree(material.diffuse),
+                             "specular": _rgb(material.specular),
+                             "exponent": ("float", material.exponent),
+                             "model": ("string", material.model)}}
     if isinstance(material, Mirror):
         return {"type": "twosided",
                 "material": {"type": "conductor", "material": ("string", "none"),
@@ -118,15 +149,101 @@ def emitter_tree(light) -> dict:
     raise TypeError(f"no Mitsuba conversion for {type(light).__name__}")
 
 
-def shape_tree(scene: Scene, shape, index: int) -> dict:
-    """Plugin tree of a shape; a triangle is ``{"type": "mesh", "vertices": 3x3}``."""
+#: Largest distance of a paraboloid's chords from the surface, relative to its size.
+PARABOLOID_DEVIATION = 1e-4
+
+
+def _mesh_node(name, vertices, faces, normals=None, uvs=None) -> dict:
+    """An in-memory mesh (an ``obj`` file beside the XML)."""
+    return {"type": "mesh", "name": name, "vertices": np.asarray(vertices, dtype=np.float64),
+            "faces": np.asarray(faces, dtype=np.int64).reshape(-1, 3),
+            "normals": None if normals is None else np.asarray(normals, dtype=np.float64),
+            "uvs": None if uvs is None else np.asarray(uvs, dtype=np.float64)}
+
+
+def polygon_mesh(poly: Polygon):
+    """(vertices, faces, uvs) of a polygon by ear clipping, uvs = its plane's 2D coordinates."""
+    from tracer.shapes.polygon import ear_clip, plane_frame
+
+    pts = np.asarray(poly.vertices, dtype=np.float64)
+    origin, u, v, _ = plane_frame(pts)
+    xy = (pts - origin) @ np.stack([u, v], axis=1)
+    return pts, np.asarray(ear_clip(xy)), xy
+
+
+def paraboloid_mesh(par: Paraboloid):
+    """(vertices, faces, normals, uvs, rings, segments) of a paraboloid, tessellated.
+
+    The surface is x = a s cos(phi), y = b s sin(phi), z = s^2 for
+    0 <= s <= sqrt(height). A chord across an angle step of a circle of radius R
+    lies R (1 - cos(dphi / 2)) ~ R dphi^2 / 8 inside it, and across a radial
+    step ds of the parabola z = s^2 (curvature <= 2) at most ds^2 / 4, so
+    dphi = sqrt(8 e / R) and ds = sqrt(4 e) keep both within e =
+    PARABOLOID_DEVIATION x the shape's size. Vertex normals are the exact
+    gradients, interpolated across each triangle like the tracer's smooth meshes.
+    """
+    m = np.asarray(par.to_world, dtype=np.float64)
+    s_max = math.sqrt(par.height)
+    r = max(par.a, par.b) * s_max
+    size = max(r, par.height)
+    e = PARABOLOID_DEVIATION * size
+    segments = max(16, math.ceil(2 * math.pi / math.sqrt(8 * e / r)))
+    rings = max(8, math.ceil(s_max / math.sqrt(4 * e)))
+    s_vals = np.linspace(0, s_max, rings + 1)
+    phi = np.linspace(0, 2 * math.pi, segments + 1)
+    S, P = np.meshgrid(s_vals, phi, indexing="ij")
+    local = np.stack([par.a * S * np.cos(P), par.b * S * np.sin(P), S * S], axis=-1)
+    grad = np.stack([2 * local[..., 0] / par.a ** 2, 2 * local[..., 1] / par.b ** 2,
+                     -np.ones_like(S)], axis=-1)
+    uvs = np.stack([S / s_max, P / (2 * math.pi)], axis=-1)
+    verts = tf.apply_point(m, local.reshape(-1, 3))
+    normals = tf.apply_normal(m, grad.reshape(-1, 3))
+    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
+    idx = np.arange((rings + 1) * (segments + 1)).reshape(rings + 1, segments + 1)
+    a, b = idx[:-1, :-1], idx[1:, :-1]
+    c, d = idx[1:, 1:], idx[:-1, 1:]
+    # Counter-clockwise seen along the gradient (the outside, down and out).
+    faces = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),
+                            np.stack([a, d, c], -1).reshape(-1, 3)])
+    area = np.linalg.norm(np.cross(verts[faces[:, 1]] - verts[faces[:, 0]],
+                                   verts[faces[:, 2]] - verts[faces[:, 0]]), axis=1)
+    faces = faces[area > 0]  # the apex ring collapses to a point
+    return verts, faces, normals, uvs.reshape(-1, 2), rings, segments
+
+
+def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape") -> dict:
+    """Plugin tree of a shape; in-memory meshes are ``{"type": "mesh", ...}`` nodes."""
+    name = f"{prefix}_{index}"
     if isinstance(shape, Sphere):
+        # Mitsuba composes to_world x translate(center) x scale(radius): give it the rotation.
+        rot = np.eye(4)
+        rot[:3, :3] = np.asarray(shape.rotation)
         t = {"type": "sphere", "center": ("point", shape.center),
              "radius": ("float", shape.radius)}
+        if not np.allclose(rot, np.eye(4)):
+            t = {"type": "sphere", "to_world": _matrix(shape.to_world())}
     elif isinstance(shape, Rectangle):
         t = {"type": "rectangle", "to_world": _matrix(shape.to_world)}
+    elif isinstance(shape, Disk):
+        t = {"type": "disk", "to_world": _matrix(shape.to_world)}
+    elif isinstance(shape, Cylinder):
+        t = {"type": "cylinder", "p0": ("point", shape.p0), "p1": ("point", shape.p1),
+             "radius": ("float", shape.radius), "to_world": _matrix(shape.to_world)}
     elif isinstance(shape, Triangle):
-        t = {"type": "mesh", "vertices": shape.vertices, "name": f"triangle_{index}"}
+        t = _mesh_node(name, shape.vertices, [[0, 1, 2]])
+    elif isinstance(shape, Polygon):
+        verts, faces, uvs = polygon_mesh(shape)
+        t = _mesh_node(name, verts, faces, None, uvs)
+    elif isinstance(shape, Paraboloid):
+        verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape)
+        t = _mesh_node(name, verts, faces, normals, uvs)
+    elif isinstance(shape, Mesh):
+        kind = "ply" if shape.file.lower().endswith(".ply") else "obj"
+        t = {"type": kind, "filename": ("string", shape.file),
+             "face_normals": ("boolean", not shape.smooth), "to_world": _matrix(shape.to_world)}
+    elif isinstance(shape, Instance):
+        return {"type": "instance", "to_world": _matrix(shape.to_world),
+                "shapegroup": {"type": "ref", "id": ("string", f"group_{shape.group}")}}
     else:
         raise TypeError(f"no Mitsuba conversion for {type(shape).__name__}")
     t["bsdf"] = bsdf_tree(scene.material_of(shape))
@@ -151,6 +268,13 @@ def scene_tree(scene: Scene, integrator: str = "whitted", moments: bool = False,
             "integrator": integrator_tree(scene, integrator, moments)}
     for i, light in enumerate(scene.lights):
         tree[f"light_{i}"] = emitter_tree(light)
+    used = {s.group for s in scene.shapes if isinstance(s, Instance)}
+    for gname, members in scene.groups.items():
+        if gname in used:
+            group = {"type": "shapegroup"}
+            for i, shape in enumerate(members):
+                group[f"shape_{i}"] = shape_tree(scene, shape, i, f"group_{gname}")
+            tree[f"group_{gname}"] = group
     for i, shape in enumerate(scene.shapes):
         tree[f"shape_{i}"] = shape_tree(scene, shape, i)
     return tree
@@ -168,12 +292,22 @@ def to_dict(tree: dict, mi) -> dict:
         props["bsdf"] = mi.load_dict(to_dict(tree["bsdf"], mi))
         if "emitter" in tree:
             props["emitter"] = mi.load_dict(to_dict(tree["emitter"], mi))
-        mesh = mi.Mesh(tree["name"], 3, 1, props)
+        v, f = tree["vertices"], tree["faces"]
+        normals, uvs = tree["normals"], tree["uvs"]
+        if normals is None:
+            props["face_normals"] = True
+        mesh = mi.Mesh(tree["name"], len(v), len(f), props,
+                       has_vertex_normals=normals is not None,
+                       has_vertex_texcoords=uvs is not None)
         params = mi.traverse(mesh)
-        params["vertex_positions"] = dr.ravel(mi.Point3f(
-            *[mi.Float(np.asarray(tree["vertices"], dtype=np.float32)[:, k]) for k in range(3)]))
-        params["faces"] = mi.UInt32([0, 1, 2])
+        params["vertex_positions"] = mi.Float(np.asarray(v, dtype=np.float32).ravel())
+        params["faces"] = mi.UInt32(np.asarray(f, dtype=np.uint32).ravel())
+        if normals is not None:
+            params["vertex_normals"] = mi.Float(np.asarray(normals, dtype=np.float32).ravel())
+        if uvs is not None:
+            params["vertex_texcoords"] = mi.Float(np.asarray(uvs, dtype=np.float32).ravel())
         params.update()
+        dr.eval()
         return mesh
     out = {}
     for k, v in tree.items():
@@ -183,6 +317,8 @@ def to_dict(tree: dict, mi) -> dict:
             kind, val = v
             if kind == "matrix":
                 out[k] = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
+            elif kind == "uvscale":
+                out[k] = mi.ScalarTransform3f().scale(mi.ScalarPoint2f(*val))
             elif kind in ("point", "vector"):
                 out[k] = mi.ScalarPoint3f(*val) if kind == "point" else mi.ScalarVector3f(*val)
             elif kind == "rgb":
@@ -211,19 +347,24 @@ _CHILD_TAGS = {"film": "film", "sampler": "sampler", "rfilter": "rfilter", "bsdf
                "material": "bsdf", "emitter": "emitter"}
 
 
-def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = None) -> list[str]:
+def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = None,
+         name: str | None = None) -> list[str]:
     pad = "    " * indent
     id_attr = f" id={quoteattr(obj_id)}" if obj_id else ""
+    name_attr = f" name={quoteattr(name)}" if name else ""
+    if tree["type"] == "ref":
+        return [f'{pad}<ref id={quoteattr(tree["id"][1])}/>']
     if tree["type"] == "mesh":
         meshes.append(tree)
         lines = [f'{pad}<shape type="obj"{id_attr}>',
                  f'{pad}    <string name="filename" value="meshes/{tree["name"]}.obj"/>',
-                 f'{pad}    <boolean name="face_normals" value="true"/>']
+                 f'{pad}    <boolean name="face_normals" value="'
+                 f'{"true" if tree["normals"] is None else "false"}"/>']
         lines += _xml(tree["bsdf"], "bsdf", indent + 1, meshes)
         if "emitter" in tree:
             lines += _xml(tree["emitter"], "emitter", indent + 1, meshes)
         return lines + [f"{pad}</shape>"]
-    lines = [f'{pad}<{tag} type="{tree["type"]}"{id_attr}>']
+    lines = [f'{pad}<{tag} type="{tree["type"]}"{id_attr}{name_attr}>']
     for k, v in tree.items():
         if k == "type":
             continue
@@ -232,12 +373,21 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
                          f'{", ".join(_fmt(x) for x in v["value"][1])}"/>')
             continue
         if isinstance(v, dict):
-            lines += _xml(v, _CHILD_TAGS[k], indent + 1, meshes)
+            if k.startswith("shape_"):
+                lines += _xml(v, "shape", indent + 1, meshes)
+            elif k in _CHILD_TAGS:
+                lines += _xml(v, _CHILD_TAGS[k], indent + 1, meshes)
+            else:  # a texture given for a parameter, e.g. reflectance
+                lines += _xml(v, "texture", indent + 1, meshes, name=k)
             continue
         kind, val = v
         if kind == "matrix":
             flat = " ".join(_fmt(x) for row in val for x in row)
             lines += [f'{pad}    <transform name="{k}">', f'{pad}        <matrix value="{flat}"/>',
+                      f"{pad}    </transform>"]
+        elif kind == "uvscale":
+            lines += [f'{pad}    <transform name="{k}">',
+                      f'{pad}        <scale x="{_fmt(val[0])}" y="{_fmt(val[1])}"/>',
                       f"{pad}    </transform>"]
         elif kind in ("point", "vector"):
             lines.append(f'{pad}    <{kind} name="{k}" value="{", ".join(_fmt(x) for x in val)}"/>')
@@ -248,6 +398,24 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
         else:
             lines.append(f'{pad}    <{kind} name="{k}" value={quoteattr(str(val))}/>')
     return lines + [f"{pad}</{tag}>"]
+
+
+def _write_obj(path: Path, node: dict) -> None:
+    v, f = node["vertices"], node["faces"]
+    lines = [f"v {_fmt(a)} {_fmt(b)} {_fmt(c)}\n" for a, b, c in np.asarray(v, dtype=np.float32)]
+    if node["uvs"] is not None:
+        lines += [f"vt {_fmt(a)} {_fmt(b)}\n" for a, b in np.asarray(node["uvs"], np.float32)]
+    if node["normals"] is not None:
+        lines += [f"vn {_fmt(a)} {_fmt(b)} {_fmt(c)}\n"
+                  for a, b, c in np.asarray(node["normals"], dtype=np.float32)]
+    has_t, has_n = node["uvs"] is not None, node["normals"] is not None
+    for tri in np.asarray(f) + 1:
+        corners = []
+        for i in tri:
+            corners.append(f"{i}/{i if has_t else ''}/{i}" if has_n else
+                           (f"{i}/{i}" if has_t else f"{i}"))
+        lines.append("f " + " ".join(corners) + "\n")
+    path.write_text("".join(lines))
 
 
 def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> list[Path]:
@@ -263,9 +431,13 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
         if tag is None:
             tag = "emitter" if key.startswith("light_") else "shape"
         body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None)
+    needs_phong = any('type="whitted_phong"' in line for line in body)
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
             "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
             "--integrator direct for a stock integrator.") if integrator == "whitted" else ""
+    if needs_phong:
+        note += (" Its phong materials use the `whitted_phong` BSDF, registered by "
+                 "reference.mitsuba().")
     header = [
         '<?xml version="1.0" encoding="utf-8"?>',
         f"<!-- Exported by whitted from {scene.path}. {note} -->",
@@ -276,8 +448,7 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
         (path.parent / "meshes").mkdir(parents=True, exist_ok=True)
     for m in meshes:
         obj = path.parent / "meshes" / f"{m['name']}.obj"
-        v = np.asarray(m["vertices"], dtype=np.float32)
-        obj.write_text("".join(f"v {_fmt(a)} {_fmt(b)} {_fmt(c)}\n" for a, b, c in v) + "f 1 2 3\n")
+        _write_obj(obj, m)
         files.append(obj)
     path.write_text("\n".join(header + body + ["</scene>", ""]))
     return [path] + files

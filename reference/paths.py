@@ -83,7 +83,7 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
     from tracer.camera import generate_rays
     from tracer.fresnel import fresnel_exact, fresnel_schlick, reflect, refract
     from tracer.geometry import Geometry, spawn_offset
-    from tracer.scene import Dielectric, Diffuse, Mirror, Sphere
+    from tracer.scene import Dielectric, Diffuse, Mirror, Phong, Sphere
 
     geo = Geometry(scene)
     W, H = scene.film.width, scene.film.height
@@ -100,6 +100,9 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
              float(np.asarray(tmax)[i]), 1.0, "", i, "camera") for i in range(len(pixels))]
     lights = _light_points(scene)
     scale = _scene_scale(scene)
+    names = list(scene.materials)
+    mat_of = np.asarray(geo.material_id)
+    emits = np.asarray(geo.radiance).T.max(axis=1) > 0
     for depth in range(1, scene.film.max_depth + 1):
         if not rays:
             break
@@ -120,16 +123,17 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
                 continue
             p, n = P[i], N[i]
             tree.segments.append(Segment(ro, p, kind, ti))
-            shape = geo.shapes[prim[i]]
+            k = int(prim[i])
             cos_o = -float(np.dot(n, rd))
-            if shape.emitter is not None and cos_o > 0:
+            if emits[k] and cos_o > 0:
                 tree.paths.append("L" + letters[::-1] + "E")
             if depth == scene.film.max_depth:
                 continue
-            mat = scene.material_of(shape)
+            mid = int(mat_of[k])
+            mat = scene.materials[names[mid]] if mid < len(names) else None
             ns = n if cos_o >= 0 else -n
             off = float(np.asarray(spawn_offset(v3(p)))[0])
-            if isinstance(mat, Diffuse) and depth < scene.film.max_depth:
+            if isinstance(mat, (Diffuse, Phong)) and depth < scene.film.max_depth:
                 origin = p + ns * off
                 for pos, direction, lshape in lights:
                     if pos is None:
@@ -175,8 +179,14 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
 def _scene_scale(scene) -> float:
     pts = [np.asarray(scene.camera.origin), np.asarray(scene.camera.target)]
     for s in scene.shapes:
-        pts.append(np.asarray(getattr(s, "center", None) if hasattr(s, "center") else
-                              (s.corners()[0] if hasattr(s, "corners") else s.vertices[0])))
+        if hasattr(s, "center"):
+            pts.append(np.asarray(s.center))
+        elif hasattr(s, "corners"):
+            pts.append(s.corners()[0])
+        elif hasattr(s, "vertices"):
+            pts.append(np.asarray(s.vertices[0]))
+        elif hasattr(s, "to_world"):
+            pts.append(np.asarray(s.to_world)[:3, 3])
     a = np.array(pts, dtype=np.float64)
     return 2.0 * float(np.linalg.norm(a.max(axis=0) - a.min(axis=0))) + 1.0
 

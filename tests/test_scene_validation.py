@@ -151,3 +151,69 @@ def test_non_square_spp_rounds_up_like_mitsuba():
     text = "[film]\nspp=10\n[camera]\norigin=[0,0,5]\ntarget=[0,0,0]\n"
     s = parse_scene(__import__("tomllib").loads(text))
     assert s.film.strata == 4  # Mitsuba's stratified sampler: ceil(sqrt(10))^2 = 16
+
+
+BASE = "[camera]\norigin=[0,0,5]\ntarget=[0,0,0]\n[materials.m]\ntype='diffuse'\n"
+
+
+def test_missing_mesh_file_is_refused_with_one_line(tmp_path):
+    scene = write_scene(tmp_path, BASE + "[[shapes]]\ntype='mesh'\nfile='nowhere.obj'\n"
+                                         "material='m'\n")
+    out = tmp_path / "out.exr"
+    r = run_cli("render", scene, "-o", out)
+    assert r.returncode == 2 and len(r.stderr.strip().splitlines()) == 1
+    assert "shapes[0].file" in r.stderr and "nowhere.obj" in r.stderr
+    assert "Traceback" not in r.stderr and not out.exists()
+
+
+@pytest.mark.parametrize("shapes,key,words", [
+    ("[[shapes]]\ntype='instance'\ngroup='nope'\n", "shapes[0].group", 'unknown group "nope"'),
+    ("[groups.g]\n[[groups.g.shapes]]\ntype='instance'\ngroup='g'\n", "groups.g.shapes[0].type",
+     "nested instancing"),
+    ("[[shapes]]\ntype='cylinder'\nmaterial='m'\nemitter={radiance=1}\n", "shapes[0].emitter",
+     "not on a cylinder"),
+    ("[[shapes]]\ntype='polygon'\nmaterial='m'\nvertices=[[0,0,0],[1,0,0],[1,1,0],[0,1,0.5]]\n",
+     "shapes[0].vertices", "planar"),
+    # A pentagram drawn point to point: its edges cross.
+    ("[[shapes]]\ntype='polygon'\nmaterial='m'\nvertices=[[0.0,1.0,0],[-0.5878,-0.809,0],[0.9511,0.309,0],[-0.9511,0.309,0],[0.5878,-0.809,0]]\n",
+     "shapes[0].vertices", "simple"),
+    ("[[shapes]]\ntype='polygon'\nmaterial='m'\nvertices=[[0,0,0],[1,0,0]]\n",
+     "shapes[0].vertices", "at least 3"),
+    ("[[shapes]]\ntype='paraboloid'\nmaterial='m'\na=0\n", "shapes[0].a", "> 0"),
+    ("[[shapes]]\ntype='cylinder'\nmaterial='m'\nto_world=[{scale=[1,2,1]}]\n",
+     "shapes[0].to_world", "cross-section"),
+    ("[[shapes]]\ntype='cylinder'\nmaterial='m'\np0=[1,1,1]\np1=[1,1,1]\n", "shapes[0].p1",
+     "different from p0"),
+    ("[[shapes]]\ntype='mesh'\nmaterial='m'\nfile='x.obj'\nsmooth='yes'\n", "shapes[0].file",
+     "no such mesh file"),
+])
+def test_bad_new_shapes_name_their_key(shapes, key, words):
+    with pytest.raises(SceneError) as e:
+        parse_scene(__import__("tomllib").loads(BASE + shapes), "x.toml")
+    assert e.value.key == key, str(e.value)
+    assert words in str(e.value)
+
+
+@pytest.mark.parametrize("material,key,words", [
+    ("type='phong'\ndiffuse=0.7\nspecular=0.5\n", "materials.p.specular", "diffuse + specular"),
+    ("type='phong'\nexponent=0\n", "materials.p.exponent", "> 0"),
+    ("type='phong'\nmodel='cook-torrance'\n", "materials.p.model", "blinn-phong"),
+    ("type='diffuse'\nreflectance={checkerboard={color0=0.5,scale=-1}}\n",
+     "materials.p.reflectance.checkerboard.scale", "positive"),
+    ("type='diffuse'\nreflectance={marble={}}\n", "materials.p.reflectance.checkerboard",
+     "missing"),
+])
+def test_bad_new_materials_name_their_key(material, key, words):
+    text = "[camera]\norigin=[0,0,5]\ntarget=[0,0,0]\n[materials.p]\n" + material
+    with pytest.raises(SceneError) as e:
+        parse_scene(__import__("tomllib").loads(text), "x.toml")
+    assert e.value.key == key, str(e.value)
+    assert words in str(e.value)
+
+
+def test_ambient_and_schlick_may_be_declared_tracer_only():
+    text = ("[compare]\ntracer_only=['ambient','schlick']\n[camera]\norigin=[0,0,5]\n"
+            "target=[0,0,0]\n")
+    assert parse_scene(__import__("tomllib").loads(text)).tracer_only == ("ambient", "schlick")
+    with pytest.raises(SceneError):
+        parse_scene(__import__("tomllib").loads(text.replace("'ambient'", "'fog'")))

@@ -1,12 +1,25 @@
 """The scene's shapes as Dr.Jit tables, closest-hit queries and the hit record.
 
-Shapes are grouped by kind into structure-of-arrays tables; every primitive
-has a global id: spheres first, then rectangles, then triangles. A query
-walks each table in a symbolic loop (one loop iteration per primitive, all
-rays of the wavefront at once) and keeps the nearest hit, which is what
-lecture 1's "Intersection routine" does for one ray at a time. Tables live in
-Dr.Jit arrays, not kernel constants, so the compiled kernels depend on the
-scene's structure (which lights, which shape kinds) but not on its numbers.
+Shapes are gathered into blocks of one kind each (spheres, rectangles,
+disks, single triangles, polygons, cylinders, paraboloids, one block per
+mesh, one per instance). Every primitive has a global id: each block owns a
+contiguous range. A query asks every block for its nearest hit and keeps the
+nearest of all, which is what lecture 1's "Intersection routine" does for
+one ray at a time, here for a whole wavefront at once.
+
+Small tables are written into the kernel one primitive after another with
+their numbers as constants; larger ones are walked by a symbolic loop that
+gathers each primitive; meshes are searched through a bounding-volume
+hierarchy (tracer/bvh.py). An instance takes the ray into its group's object
+space, asks the group's own geometry, and brings the hit record back
+(lecture 2, "Instancing"): t is kept because the ray is transformed rather
+than renormalised, points go back by the instance's to_world and normals by
+its inverse transpose.
+
+The hit record (:class:`Surface`) holds the position, the geometric normal
+(outward, unit), the shading normal (the interpolated vertex normal of a
+smooth mesh, else the geometric one) and Mitsuba's texture coordinates for
+each kind of shape.
 """
 
 from __future__ import annotations
@@ -17,7 +30,21 @@ import drjit as dr
 import numpy as np
 
 from tracer.backend import jit
-from tracer.scene import Rectangle, Scene, Sphere, Triangle
+from tracer.scene import (
+    Cylinder,
+    Disk,
+    Instance,
+    Mesh,
+    Paraboloid,
+    Polygon,
+    Rectangle,
+    Sphere,
+    Triangle,
+)
+from tracer.shapes import cylinder as cyl_f
+from tracer.shapes import disk as disk_f
+from tracer.shapes import paraboloid as par_f
+from tracer.shapes import polygon as poly_f
 from tracer.shapes import rectangle as rect_f
 from tracer.shapes import sphere as sphere_f
 from tracer.shapes import triangle as tri_f
@@ -28,7 +55,7 @@ INVALID = 0xFFFFFFFF
 UNROLL = 16
 
 # Material kinds, as stored in the material table.
-DIFFUSE, MIRROR, DIELECTRIC, BLACK = 0, 1, 2, 3
+DIFFUSE, MIRROR, DIELECTRIC, BLACK, PHONG = 0, 1, 2, 3, 4
 
 
 def _v3(rows) -> object:
@@ -44,9 +71,14 @@ def _u(values) -> object:
     return jit.UInt32(np.asarray(values, dtype=np.uint32))
 
 
+def _c3(v) -> object:
+    """A constant 3-vector written into the kernel."""
+    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+
+
 @dataclass
 class Hit:
-    """The hit record: ray parameter and global primitive id (INVALID for a miss)."""
+    """The hit record's core: ray parameter and global primitive id (INVALID for a miss)."""
     t: object
     prim: object
 
@@ -57,72 +89,411 @@ class Hit:
 
 @dataclass
 class Surface:
-    """Where a ray hit: position, unit geometric normal (outward), texture coordinates."""
+    """Where a ray hit: position, unit normals (geometric, shading), texture coordinates."""
     p: object
     n: object
+    ns: object
     uv: object
 
 
+# --------------------------------------------------------------------------- blocks
+
+
+class _Block:
+    """A contiguous range of primitive ids [base, base + count) of one kind."""
+    base = 0
+    count = 0
+
+    def intersect(self, o, d, t, prim, active):
+        raise NotImplementedError
+
+    def surface(self, k, o, d, t, mask):
+        """(p, n, ns, uv) for lanes in ``mask``, whose local primitive index is k."""
+        raise NotImplementedError
+
+    def _update(self, ti, hit, i, t, prim):
+        return dr.select(hit, ti, t), dr.select(hit, i + self.base, prim)
+
+
+class _TableBlock(_Block):
+    """Primitives stored as arrays; unrolled with constants when few, else a symbolic loop."""
+    fields: tuple[str, ...] = ()
+
+    def _constants(self):
+        self.const = {}
+        for name in self.fields:
+            a = getattr(self, name).numpy()
+            if a.ndim == 1:
+                self.const[name] = [float(x) for x in a]
+            else:
+                self.const[name] = [jit.Array3f(*(float(x) for x in col)) for col in a.T]
+
+    def get(self, name, i, active=True):
+        if isinstance(i, int):
+            return self.const[name][i]
+        src = getattr(self, name)
+        return dr.gather(type(src), src, i, active)
+
+    def test(self, o, d, t, i):
+        raise NotImplementedError
+
+    def intersect(self, o, d, t, prim, active):
+        if self.count <= UNROLL:
+            for i in range(self.count):
+                ti, hit = self.test(o, d, t, i)
+                t, prim = self._update(ti, hit, i, t, prim)
+            return t, prim
+        return self._looped(o, d, t, prim, active)
+
+    @dr.syntax
+    def _looped(self, o, d, t, prim, active):
+        i = jit.UInt32(0)
+        count = dr.opaque(jit.UInt32, self.count)
+        while active & (i < count):
+            ti, hit = self.test(o, d, t, i)
+            t, prim = self._update(ti, hit, i, t, prim)
+            i += 1
+        return t, prim
+
+
+class _SphereBlock(_TableBlock):
+    fields = ("c", "r")
+
+    def __init__(self, spheres: list[Sphere]):
+        self.count = len(spheres)
+        self.c = _v3([s.center for s in spheres])
+        self.r = _f([s.radius for s in spheres])
+        # Rows of each sphere's inverse rotation (its local frame, for uv).
+        rot = np.asarray([np.asarray(s.rotation) for s in spheres])  # (N, 3, 3)
+        self.r0, self.r1, self.r2 = (_v3(rot[:, :, k]) for k in range(3))
+        self._constants()
+
+    def test(self, o, d, t, i):
+        return sphere_f.intersect(o, d, self.get("c", i), self.get("r", i), t)
+
+    def surface(self, k, o, d, t, mask):
+        c = self.get("c", k, mask)
+        r = self.get("r", k, mask)
+        p = dr.fma(d, t, o)
+        n = dr.normalize(p - c)
+        p = dr.fma(n, r, c)  # re-project onto the sphere: the error stays relative to r
+        # Local direction R^T n (columns of R are the local axes in world space).
+        local = jit.Array3f(dr.dot(dr.gather(jit.Array3f, self.r0, k, mask), n),
+                            dr.dot(dr.gather(jit.Array3f, self.r1, k, mask), n),
+                            dr.dot(dr.gather(jit.Array3f, self.r2, k, mask), n))
+        phi = dr.atan2(local.y, local.x)
+        phi = dr.select(phi < 0, phi + 2 * dr.pi, phi)
+        uv = jit.Array2f(phi * (0.5 / dr.pi), dr.acos(dr.clip(local.z, -1, 1)) / dr.pi)
+        return p, n, n, uv
+
+
+class _PlanarBlock(_TableBlock):
+    """Rectangles or disks: a centre, two axes (as a dual basis) and a normal."""
+    fields = ("c", "n", "ud", "vd")
+
+    def __init__(self, shapes, round_: bool):
+        self.round = round_
+        self.count = len(shapes)
+        frames = [s.corners() for s in shapes]
+        duals = [rect_f.frame(c, u, v) for c, u, v in frames]
+        self.c = _v3([c for c, _, _ in frames])
+        self.n = _v3([s.normal() for s in shapes])  # Mitsuba's: inverse transpose of +z
+        self.ud = _v3([ud for _, ud, _ in duals])
+        self.vd = _v3([vd for _, _, vd in duals])
+        self._constants()
+
+    def test(self, o, d, t, i):
+        f = disk_f.intersect if self.round else rect_f.intersect
+        ti, hit, _, _ = f(o, d, self.get("c", i), self.get("n", i), self.get("ud", i),
+                          self.get("vd", i), t)
+        return ti, hit
+
+    def surface(self, k, o, d, t, mask):
+        c, n = self.get("c", k, mask), self.get("n", k, mask)
+        p = dr.fma(d, t, o)
+        p = p - dr.dot(p - c, n) * n  # re-project onto the plane
+        rel = p - c
+        a = dr.dot(rel, self.get("ud", k, mask))
+        b = dr.dot(rel, self.get("vd", k, mask))
+        uv = jit.Array2f(*(disk_f.uv(a, b) if self.round else rect_f.uv(a, b)))
+        return p, n, n, uv
+
+
+class _TriangleBlock(_TableBlock):
+    fields = ("p0", "e1", "e2")
+
+    def __init__(self, tris: list[Triangle]):
+        self.count = len(tris)
+        v = np.asarray([t.vertices for t in tris], dtype=np.float64)
+        self.p0 = _v3(v[:, 0])
+        self.e1 = _v3(v[:, 1] - v[:, 0])
+        self.e2 = _v3(v[:, 2] - v[:, 0])
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        self.n = _v3(n / np.linalg.norm(n, axis=1, keepdims=True))
+        self._constants()
+
+    def test(self, o, d, t, i):
+        ti, hit, _, _ = tri_f.intersect(o, d, self.get("p0", i), self.get("e1", i),
+                                        self.get("e2", i), t)
+        return ti, hit
+
+    def surface(self, k, o, d, t, mask):
+        n = dr.gather(jit.Array3f, self.n, k, mask)
+        _, _, beta, gamma = tri_f.intersect(o, d, dr.gather(jit.Array3f, self.p0, k, mask),
+                                            dr.gather(jit.Array3f, self.e1, k, mask),
+                                            dr.gather(jit.Array3f, self.e2, k, mask), dr.inf)
+        # Mitsuba's mesh without texture coordinates: uv = (beta, gamma).
+        return dr.fma(d, t, o), n, n, jit.Array2f(beta, gamma)
+
+
+class _PolygonBlock(_Block):
+    """Each polygon unrolled: its plane and its 2D outline as kernel constants."""
+
+    def __init__(self, polys: list[Polygon]):
+        self.count = len(polys)
+        self.items = []
+        for poly in polys:
+            pts = np.asarray(poly.vertices, dtype=np.float64)
+            origin, u, v, n = poly_f.plane_frame(pts)
+            xy = (pts - origin) @ np.stack([u, v], axis=1)
+            self.items.append((origin, u, v, n, [float(x) for x in xy[:, 0]],
+                               [float(y) for y in xy[:, 1]]))
+
+    def intersect(self, o, d, t, prim, active):
+        for i, (origin, u, v, n, xs, ys) in enumerate(self.items):
+            ti, hit, _, _ = poly_f.intersect(o, d, _c3(origin), _c3(n), _c3(u), _c3(v), xs, ys,
+                                             t)
+            t, prim = self._update(ti, hit, i, t, prim)
+        return t, prim
+
+    def surface(self, k, o, d, t, mask):
+        p = dr.fma(d, t, o)
+        n = dr.zeros(jit.Array3f, dr.width(p))
+        uv = dr.zeros(jit.Array2f, dr.width(p))
+        for i, (origin, u, v, nn, _, _) in enumerate(self.items):
+            sel = mask & (k == i)
+            rel = p - _c3(origin)
+            n = dr.select(sel, _c3(nn), n)
+            # The plane's own 2D coordinates (the conversion gives Mitsuba the same uvs).
+            uv = dr.select(sel, jit.Array2f(dr.dot(rel, _c3(u)), dr.dot(rel, _c3(v))), uv)
+        return p, n, n, uv
+
+
+class _QuadricBlock(_Block):
+    """Cylinders or paraboloids, each intersected in its own local space (unrolled)."""
+
+    def __init__(self, shapes, kind: str):
+        self.kind = kind
+        self.count = len(shapes)
+        self.items = []
+        for s in shapes:
+            m = s.local_to_world() if kind == "cyl" else np.asarray(s.to_world)
+            inv = np.linalg.inv(m)
+            normal_m = np.linalg.inv(m[:3, :3]).T  # normals: the inverse transpose
+            extra = None if kind == "cyl" else (1 / s.a ** 2, 1 / s.b ** 2, s.height, s.a, s.b)
+            self.items.append((m, inv, normal_m, extra))
+
+    @staticmethod
+    def _apply(m, p, point=True):
+        rows = [jit.Array3f(float(m[r, 0]), float(m[r, 1]), float(m[r, 2])) for r in range(3)]
+        x, y, z = (dr.dot(row, p) for row in rows)
+        if point:
+            x, y, z = x + float(m[0, 3]), y + float(m[1, 3]), z + float(m[2, 3])
+        return jit.Array3f(x, y, z)
+
+    def _local_ray(self, item, o, d):
+        _, inv, _, _ = item
+        return self._apply(inv, o), self._apply(inv, d, point=False)
+
+    def _test(self, item, o, d, t):
+        ol, dl = self._local_ray(item, o, d)
+        if self.kind == "cyl":
+            return cyl_f.intersect(ol, dl, t)
+        ia2, ib2, h, _, _ = item[3]
+        return par_f.intersect(ol, dl, ia2, ib2, h, t)
+
+    def intersect(self, o, d, t, prim, active):
+        for i, item in enumerate(self.items):
+            ti, hit = self._test(item, o, d, t)
+            t, prim = self._update(ti, hit, i, t, prim)
+        return t, prim
+
+    def surface(self, k, o, d, t, mask):
+        p = dr.fma(d, t, o)
+        n = dr.zeros(jit.Array3f, dr.width(p))
+        uv = dr.zeros(jit.Array2f, dr.width(p))
+        pw = p
+        for i, item in enumerate(self.items):
+            sel = mask & (k == i)
+            m, inv, normal_m, extra = item
+            local = self._apply(inv, p)
+            if self.kind == "cyl":
+                # Re-project onto the unit cylinder, as Mitsuba does, to limit round-off.
+                inv_r = dr.rsqrt(local.x * local.x + local.y * local.y)
+                local = jit.Array3f(local.x * inv_r, local.y * inv_r, local.z)
+                grad = cyl_f.local_normal(local)
+                u, v = cyl_f.uv(local)
+            else:
+                ia2, ib2, h, a, b = extra
+                grad = par_f.gradient(local, ia2, ib2)
+                u, v = par_f.uv(local, a, b, h)
+            nw = dr.normalize(self._apply(normal_m, grad, point=False))
+            n = dr.select(sel, nw, n)
+            pw = dr.select(sel, self._apply(m, local), pw)
+            uv = dr.select(sel, jit.Array2f(u, v), uv)
+        return pw, n, n, uv
+
+
+class _MeshBlock(_Block):
+    """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
+
+    def __init__(self, mesh: Mesh):
+        from tracer.bvh import BVH
+
+        v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
+        self.count = len(f)
+        self.bvh = BVH(v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
+        n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
+        self.face_n = _v3(n)
+        self.faces = _u(f.reshape(-1))
+        self.p = _v3(v)
+        self.vn = None if mesh.normals is None else _v3(mesh.normals)
+        self.vt = None
+        if mesh.uvs is not None:
+            uvs = np.asarray(mesh.uvs, dtype=np.float32)
+            self.vt = jit.Array2f(uvs[:, 0], uvs[:, 1])
+
+    def intersect(self, o, d, t, prim, active):
+        ti, tri, _, _ = self.bvh.closest_hit(o, d, t, active)
+        hit = tri != INVALID
+        return self._update(ti, hit, tri, t, prim)
+
+    def surface(self, k, o, d, t, mask):
+        i0 = dr.gather(jit.UInt32, self.faces, 3 * k, mask)
+        i1 = dr.gather(jit.UInt32, self.faces, 3 * k + 1, mask)
+        i2 = dr.gather(jit.UInt32, self.faces, 3 * k + 2, mask)
+        p0 = dr.gather(jit.Array3f, self.p, i0, mask)
+        p1 = dr.gather(jit.Array3f, self.p, i1, mask)
+        p2 = dr.gather(jit.Array3f, self.p, i2, mask)
+        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1 - p0, p2 - p0, dr.inf)
+        n = dr.gather(jit.Array3f, self.face_n, k, mask)
+        ns = n
+        if self.vn is not None:  # barycentric interpolation of the vertex normals
+            ns = dr.normalize(tri_f.interpolate(
+                beta, gamma, dr.gather(jit.Array3f, self.vn, i0, mask),
+                dr.gather(jit.Array3f, self.vn, i1, mask),
+                dr.gather(jit.Array3f, self.vn, i2, mask)))
+        if self.vt is not None:
+            uv = tri_f.interpolate(beta, gamma, dr.gather(jit.Array2f, self.vt, i0, mask),
+                                   dr.gather(jit.Array2f, self.vt, i1, mask),
+                                   dr.gather(jit.Array2f, self.vt, i2, mask))
+        else:
+            uv = jit.Array2f(beta, gamma)
+        return dr.fma(d, t, o), n, ns, uv
+
+
+class _InstanceBlock(_Block):
+    """A group's geometry seen through to_world (lecture 2: transform the ray, not the shape)."""
+
+    def __init__(self, inst: Instance, child: Geometry):
+        self.child = child
+        self.count = child.count
+        m = np.asarray(inst.to_world, dtype=np.float64)
+        self.m, self.inv = m, np.linalg.inv(m)
+        self.normal_m = np.linalg.inv(m[:3, :3]).T
+
+    def _to_object(self, o, d):
+        ol = _QuadricBlock._apply(self.inv, o)
+        dl = _QuadricBlock._apply(self.inv, d, point=False)
+        # Unit direction in object space; t scales by its length.
+        scale = dr.norm(dl)
+        return ol, dl / scale, scale
+
+    def intersect(self, o, d, t, prim, active):
+        ol, dl, scale = self._to_object(o, d)
+        hit = self.child.closest_hit(ol, dl, t * scale, active)
+        found = hit.valid
+        return self._update(hit.t / scale, found, hit.prim, t, prim)
+
+    def surface(self, k, o, d, t, mask):
+        ol, dl, scale = self._to_object(o, d)
+        s = self.child.surface(Hit(t * scale, dr.select(mask, k, INVALID)), ol, dl)
+        p = _QuadricBlock._apply(self.m, s.p)
+        n = dr.normalize(_QuadricBlock._apply(self.normal_m, s.n, point=False))
+        ns = dr.normalize(_QuadricBlock._apply(self.normal_m, s.ns, point=False))
+        return p, n, ns, s.uv
+
+
+# --------------------------------------------------------------------------- geometry
+
+
 class Geometry:
-    """Intersection tables built from a validated scene."""
+    """All shapes of a scene (or of one group), with intersection and hit records."""
 
-    def __init__(self, scene: Scene):
-        spheres = [s for s in scene.shapes if isinstance(s, Sphere)]
-        rects = [s for s in scene.shapes if isinstance(s, Rectangle)]
-        tris = [s for s in scene.shapes if isinstance(s, Triangle)]
-        #: shapes in global-id order
-        self.shapes = spheres + rects + tris
-        self.n_spheres, self.n_rects, self.n_tris = len(spheres), len(rects), len(tris)
+    def __init__(self, scene, shapes=None, material_names=None):
+        shapes = list(scene.shapes if shapes is None else shapes)
+        names = list(scene.materials) if material_names is None else material_names
 
-        if spheres:
-            self.sph_c = _v3([s.center for s in spheres])
-            self.sph_r = _f([s.radius for s in spheres])
-        if rects:
-            frames = [r.corners() for r in rects]
-            duals = [rect_f.frame(c, u, v) for c, u, v in frames]
-            self.rect_c = _v3([c for c, _, _ in frames])
-            self.rect_u = _v3([u for _, u, _ in frames])
-            self.rect_v = _v3([v for _, _, v in frames])
-            # Normal as Mitsuba orients it (the inverse transpose of to_world applied to +z).
-            self.rect_n = _v3([r.normal() for r in rects])
-            self.rect_ud = _v3([ud for _, ud, _ in duals])
-            self.rect_vd = _v3([vd for _, _, vd in duals])
-        if tris:
-            v = np.asarray([t.vertices for t in tris], dtype=np.float64)
-            self.tri_p0 = _v3(v[:, 0])
-            self.tri_e1 = _v3(v[:, 1] - v[:, 0])
-            self.tri_e2 = _v3(v[:, 2] - v[:, 0])
-            n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-            self.tri_n = _v3(n / np.linalg.norm(n, axis=1, keepdims=True))
+        def of(kind):
+            return [s for s in shapes if type(s) is kind]
 
-        self._const = _constants(self)
+        order, self.blocks = [], []
 
-        # Per-primitive material index (into Materials) and emitted radiance.
-        names = list(scene.materials)
-        self.material_id = _u([names.index(s.material) if s.material is not None
-                               else len(names) for s in self.shapes] or [0])
-        self.emitters = [i for i, s in enumerate(self.shapes) if s.emitter is not None]
-        self.radiance = _v3([s.emitter.radiance if s.emitter is not None else (0, 0, 0)
-                             for s in self.shapes] or [(0, 0, 0)])
-        self.count = len(self.shapes)
+        def add(block, members):
+            block.base = sum(b.count for b in self.blocks)
+            self.blocks.append(block)
+            order.extend(members)
 
-    # ---------------------------------------------------------------- queries
+        for kind, make in ((Sphere, _SphereBlock),
+                           (Rectangle, lambda s: _PlanarBlock(s, False)),
+                           (Disk, lambda s: _PlanarBlock(s, True)),
+                           (Triangle, _TriangleBlock), (Polygon, _PolygonBlock),
+                           (Cylinder, lambda s: _QuadricBlock(s, "cyl")),
+                           (Paraboloid, lambda s: _QuadricBlock(s, "par"))):
+            members = of(kind)
+            if members:
+                add(make(members), members)
+        mesh_material = []
+        for mesh in of(Mesh):
+            add(_MeshBlock(mesh), [mesh] * len(mesh.faces))
+        for inst in of(Instance):
+            child = Geometry(scene, scene.groups[inst.group], names)
+            block = _InstanceBlock(inst, child)
+            add(block, [None] * child.count)
+            mesh_material.append((block, child))
+        #: one entry per primitive id (shape, or None inside an instance)
+        self.owner = order
+        self.count = len(order)
+        mid = []
+        for s in order:
+            mid.append(len(names) if s is None or s.material is None else
+                       names.index(s.material))
+        mid = np.asarray(mid or [0], dtype=np.uint32)
+        rad = np.zeros((max(self.count, 1), 3), dtype=np.float32)
+        for i, s in enumerate(order):
+            if s is not None and s.emitter is not None:
+                rad[i] = s.emitter.radiance
+        # Instances: their primitives take the group's own materials.
+        for block, child in mesh_material:
+            mid[block.base:block.base + child.count] = child.material_id.numpy()
+        self.material_id = _u(mid)
+        self.radiance = _v3(rad)
+        #: the top-level shapes that emit light, with their primitive ids
+        self.shapes = [s for s in order if s is not None]
+        self.emitters = [s for s in shapes if getattr(s, "emitter", None) is not None]
 
     def closest_hit(self, o, d, tmax, active=True) -> Hit:
         """Nearest intersection of each ray in (0, tmax); inactive rays report a miss.
 
-        ``d`` must be a unit vector. Tables of up to :data:`UNROLL` primitives are
-        written into the kernel one primitive after another, with their numbers
-        as constants; larger tables are walked by a symbolic loop that gathers
-        each primitive. Loops run per SIMD packet while any lane is active, so a
-        packet of rays that need no test (say, shadow rays from points facing
-        away from the light) costs almost nothing.
+        ``d`` must be a unit vector. Loops run per SIMD packet while any lane is
+        active, so a packet of rays that need no test costs almost nothing.
         """
         n = dr.width(o)
         t = jit.Float(tmax) + dr.zeros(jit.Float, n)
         prim = dr.full(jit.UInt32, INVALID, n)
         if active is True:
-            return Hit(*self._all(o, d, t, prim, True))
+            return Hit(*self._all(o, d, t, prim, jit.Bool(True)))
         return Hit(*self._masked(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, n)))
 
     def occluded(self, o, d, tmax, active=True):
@@ -139,118 +510,26 @@ class Geometry:
         return t, prim
 
     def _all(self, o, d, t, prim, active):
-        for kind in ("sph", "rect", "tri"):
-            count = getattr(self, f"n_{kind}s" if kind != "sph" else "n_spheres")
-            if count == 0:
-                continue
-            if count <= UNROLL:
-                t, prim = self._unrolled(kind, o, d, t, prim)
-            else:
-                t, prim = self._looped(kind, o, d, t, prim, active)
+        for block in self.blocks:
+            t, prim = block.intersect(o, d, t, prim, active)
         return t, prim
 
-    def _test(self, kind, o, d, t, i):
-        """(t, hit) of primitive ``i`` (a Python int or a UInt32 array) of one table."""
-        if kind == "sph":
-            return sphere_f.intersect(o, d, self._get("sph_c", i), self._get("sph_r", i), t)
-        if kind == "rect":
-            ti, hit, _, _ = rect_f.intersect(o, d, self._get("rect_c", i),
-                                             self._get("rect_n", i), self._get("rect_ud", i),
-                                             self._get("rect_vd", i), t)
-            return ti, hit
-        ti, hit, _, _ = tri_f.intersect(o, d, self._get("tri_p0", i), self._get("tri_e1", i),
-                                        self._get("tri_e2", i), t)
-        return ti, hit
-
-    def _get(self, name, i):
-        if isinstance(i, int):
-            return self._const[name][i]
-        src = getattr(self, name)
-        return dr.gather(type(src), src, i)
-
-    def _base(self, kind):
-        return {"sph": 0, "rect": self.n_spheres, "tri": self.n_spheres + self.n_rects}[kind]
-
-    def _unrolled(self, kind, o, d, t, prim):
-        base = self._base(kind)
-        for i in range(getattr(self, "n_spheres" if kind == "sph" else f"n_{kind}s")):
-            ti, hit = self._test(kind, o, d, t, i)
-            t = dr.select(hit, ti, t)
-            prim = dr.select(hit, base + i, prim)
-        return t, prim
-
-    @dr.syntax
-    def _looped(self, kind, o, d, t, prim, active):
-        i = jit.UInt32(0)
-        count = dr.opaque(jit.UInt32, getattr(self, "n_spheres" if kind == "sph"
-                                              else f"n_{kind}s"))
-        base = self._base(kind)
-        while active & (i < count):
-            ti, hit = self._test(kind, o, d, t, i)
-            t = dr.select(hit, ti, t)
-            prim = dr.select(hit, i + base, prim)
-            i += 1
-        return t, prim
-
-    # ---------------------------------------------------------------- hit record
-
-    def surface(self, hit: Hit, o, d, need_uv: bool = False) -> Surface:
-        """Position, outward unit normal and (with ``need_uv``) uv of each valid hit."""
+    def surface(self, hit: Hit, o, d, need_uv: bool = True) -> Surface:
+        """The hit record: position, geometric and shading normals, uv of each valid hit."""
         valid = hit.valid
         p = dr.fma(d, hit.t, o)
         n = dr.zeros(jit.Array3f, dr.width(p))
+        ns = dr.zeros(jit.Array3f, dr.width(p))
         uv = dr.zeros(jit.Array2f, dr.width(p))
-        prim = hit.prim
-        if self.n_spheres:
-            is_s = valid & (prim < self.n_spheres)
-            c = dr.gather(jit.Array3f, self.sph_c, prim, is_s)
-            r = dr.gather(jit.Float, self.sph_r, prim, is_s)
-            ns = dr.normalize(p - c)
-            # Re-project onto the sphere: the hit point's error stays relative to r.
-            p = dr.select(is_s, dr.fma(ns, r, c), p)
-            n = dr.select(is_s, ns, n)
-            # Mitsuba's sphere uv: (phi / 2 pi, theta / pi) in the sphere's frame.
-            if need_uv:
-                phi = dr.atan2(ns.y, ns.x)
-                phi = dr.select(phi < 0, phi + 2 * dr.pi, phi)
-                uv = dr.select(is_s, jit.Array2f(phi * (0.5 / dr.pi),
-                                                  dr.acos(dr.clip(ns.z, -1, 1)) / dr.pi), uv)
-        if self.n_rects:
-            j = prim - self.n_spheres
-            is_r = valid & (prim >= self.n_spheres) & (j < self.n_rects)
-            n = dr.select(is_r, dr.gather(jit.Array3f, self.rect_n, j, is_r), n)
-            if need_uv:
-                rel = p - dr.gather(jit.Array3f, self.rect_c, j, is_r)
-                a = dr.dot(rel, dr.gather(jit.Array3f, self.rect_ud, j, is_r))
-                b = dr.dot(rel, dr.gather(jit.Array3f, self.rect_vd, j, is_r))
-                uv = dr.select(is_r, jit.Array2f(*rect_f.uv(a, b)), uv)
-        if self.n_tris:
-            k = prim - (self.n_spheres + self.n_rects)
-            is_t = valid & (prim >= self.n_spheres + self.n_rects)
-            n = dr.select(is_t, dr.gather(jit.Array3f, self.tri_n, k, is_t), n)
-            if need_uv:
-                _, _, beta, gamma = tri_f.intersect(
-                    o, d, dr.gather(jit.Array3f, self.tri_p0, k, is_t),
-                    dr.gather(jit.Array3f, self.tri_e1, k, is_t),
-                    dr.gather(jit.Array3f, self.tri_e2, k, is_t), dr.inf)
-                # Mitsuba's mesh without uvs: the barycentrics (beta, gamma).
-                uv = dr.select(is_t, jit.Array2f(beta, gamma), uv)
-        return Surface(p, n, uv)
-
-
-def _constants(geo) -> dict[str, list]:
-    """The tables as lists of Python-side constants, for unrolled intersection code."""
-    out = {}
-    for name in ("sph_c", "sph_r", "rect_c", "rect_n", "rect_ud", "rect_vd",
-                 "tri_p0", "tri_e1", "tri_e2"):
-        if not hasattr(geo, name):
-            continue
-        a = getattr(geo, name).numpy()
-        if a.ndim == 1:
-            out[name] = [float(x) for x in a]
-        else:
-            out[name] = [jit.Array3f(*(float(x) for x in col)) for col in a.T]
-    return out
+        for block in self.blocks:
+            k = hit.prim - block.base
+            mask = valid & (hit.prim >= block.base) & (k < block.count)
+            bp, bn, bns, buv = block.surface(k, o, d, hit.t, mask)
+            p = dr.select(mask, bp, p)
+            n = dr.select(mask, bn, n)
+            ns = dr.select(mask, bns, ns)
+            uv = dr.select(mask, buv, uv)
+        return Surface(p, n, ns, uv)
 
 
 def spawn_offset(p):

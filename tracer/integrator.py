@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from tracer import backend, fresnel, lights
+from tracer import backend, fresnel, lights, phong, texture
 from tracer.backend import jit
 from tracer.camera import generate_rays
 from tracer.geometry import (
@@ -44,15 +44,19 @@ from tracer.geometry import (
     DIELECTRIC,
     DIFFUSE,
     MIRROR,
+    PHONG,
     Geometry,
     Hit,
     spawn_offset,
 )
 from tracer.sampling import pixel_samples, stratified_2d
 from tracer.scene import (
+    Checkerboard,
     Dielectric,
     DirectionalLight,
+    Disk,
     Mirror,
+    Phong,
     PointLight,
     Rectangle,
     Scene,
@@ -141,31 +145,67 @@ def _count(masks) -> int:
 
 
 class _Materials:
-    """Material table: kind, reflectance, relative index eta, Schlick flag."""
+    """Material table: kind, colours, Phong parameters, eta, Schlick flag, checkerboards."""
 
     def __init__(self, scene: Scene):
-        kinds, refl, eta, schlick = [], [], [], []
+        rows = []
         for m in scene.materials.values():
+            row = {"kind": DIFFUSE, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0,
+                   "blinn": False, "amb": (0, 0, 0), "eta": 1.0, "schlick": False,
+                   "checker": False, "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)}
             if isinstance(m, Dielectric):
-                kinds.append(DIELECTRIC)
-                refl.append((1, 1, 1))
-                eta.append(m.eta)
-                schlick.append(m.fresnel == "schlick")
+                row.update(kind=DIELECTRIC, refl=(1, 1, 1), eta=m.eta,
+                           schlick=m.fresnel == "schlick")
+            elif isinstance(m, Mirror):
+                row.update(kind=MIRROR, refl=m.reflectance)
             else:
-                kinds.append(MIRROR if isinstance(m, Mirror) else DIFFUSE)
-                refl.append(m.reflectance)
-                eta.append(1.0)
-                schlick.append(False)
-        kinds.append(BLACK)  # pure emitters: material index len(materials)
-        refl.append((0, 0, 0))
-        eta.append(1.0)
-        schlick.append(False)
-        r = np.asarray(refl, dtype=np.float32)
-        self.kind = jit.UInt32(np.asarray(kinds, dtype=np.uint32))
-        self.reflectance = jit.Array3f(r[:, 0], r[:, 1], r[:, 2])
-        self.eta = jit.Float(np.asarray(eta, dtype=np.float32))
-        self.schlick = jit.Bool(np.asarray(schlick))
-        self.has_specular = any(k in (MIRROR, DIELECTRIC) for k in kinds)
+                tex = m.diffuse if isinstance(m, Phong) else m.reflectance
+                if isinstance(tex, Checkerboard):
+                    row.update(checker=True, c0=tex.color0, c1=tex.color1, scale=tex.scale)
+                else:
+                    row.update(refl=tex)
+                if isinstance(m, Phong):
+                    row.update(kind=PHONG, ks=m.specular, p=m.exponent,
+                               blinn=m.model == "blinn-phong", amb=m.ambient)
+            rows.append(row)
+        # Pure emitters: material index len(materials), black.
+        rows.append({"kind": BLACK, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0,
+                     "blinn": False, "amb": (0, 0, 0), "eta": 1.0, "schlick": False,
+                     "checker": False, "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)})
+
+        def col(key):
+            a = np.asarray([r[key] for r in rows], dtype=np.float32)
+            return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+
+        self.kind = jit.UInt32(np.asarray([r["kind"] for r in rows], dtype=np.uint32))
+        self.reflectance = col("refl")
+        self.ks = col("ks")
+        self.ambient = col("amb")
+        self.c0, self.c1 = col("c0"), col("c1")
+        sc = np.asarray([r["scale"] for r in rows], dtype=np.float32)
+        self.scale = jit.Array2f(sc[:, 0], sc[:, 1])
+        self.exponent = jit.Float(np.asarray([r["p"] for r in rows], dtype=np.float32))
+        self.blinn = jit.Bool(np.asarray([r["blinn"] for r in rows]))
+        self.checker = jit.Bool(np.asarray([r["checker"] for r in rows]))
+        self.eta = jit.Float(np.asarray([r["eta"] for r in rows], dtype=np.float32))
+        self.schlick = jit.Bool(np.asarray([r["schlick"] for r in rows]))
+        kinds = {r["kind"] for r in rows}
+        self.has_specular = bool(kinds & {MIRROR, DIELECTRIC})
+        self.has_phong = PHONG in kinds
+        self.has_blinn = any(r["blinn"] for r in rows)
+        self.has_checker = any(r["checker"] for r in rows)
+        self.has_ambient = any(any(r["amb"]) for r in rows)
+
+    def diffuse_color(self, mid, uv, active):
+        """kd at the hit: the material's colour, or its checkerboard looked up at uv."""
+        refl = dr.gather(jit.Array3f, self.reflectance, mid, active)
+        if not self.has_checker:
+            return refl
+        checker = dr.gather(jit.Bool, self.checker, mid, active)
+        scale = dr.gather(jit.Array2f, self.scale, mid, active)
+        board = texture.checkerboard(uv, scale, dr.gather(jit.Array3f, self.c0, mid, active),
+                                     dr.gather(jit.Array3f, self.c1, mid, active))
+        return dr.select(checker, board, refl)
 
 
 def _vec(v):
@@ -213,11 +253,12 @@ class _AreaLight:
         self.kind = type(shape).__name__
         if isinstance(shape, Sphere):
             self.center, self.radius = _vec(shape.center), float(shape.radius)
-        elif isinstance(shape, Rectangle):
+        elif isinstance(shape, (Rectangle, Disk)):
             c, u, v = shape.corners()
             self.center, self.u, self.v = _vec(c), _vec(u), _vec(v)
             self.n = _vec(shape.normal())
-            self.area = 4 * float(np.linalg.norm(np.cross(u, v)))
+            area = float(np.linalg.norm(np.cross(u, v)))
+            self.area = (math.pi if isinstance(shape, Disk) else 4.0) * area
         else:
             p = np.asarray(shape.vertices)
             self.p0, self.e1, self.e2 = _vec(p[0]), _vec(p[1] - p[0]), _vec(p[2] - p[0])
@@ -245,6 +286,8 @@ class _AreaLight:
             return wi, dist * (1 - SHADOW_EPSILON), value
         if self.kind == "Rectangle":
             y = lights.sample_parallelogram(sample, self.center, self.u, self.v)
+        elif self.kind == "Disk":
+            y = lights.sample_ellipse(sample, self.center, self.u, self.v)
         else:
             y = lights.sample_triangle(sample, self.p0, self.e1, self.e2)
         to_y = y - p
@@ -277,8 +320,7 @@ class Integrator:
         self.geo = Geometry(scene)
         self.mat = _Materials(scene)
         self.delta_lights = [_DeltaLight(light) for light in scene.lights]
-        self.area_lights = [_AreaLight(s, i) for i, s in enumerate(self.geo.shapes)
-                            if s.emitter is not None]
+        self.area_lights = [_AreaLight(s, i) for i, s in enumerate(self.geo.emitters)]
         if chunk_samples is None:
             chunk_samples = (1 << 24) if backend.name() == "cuda" else (1 << 21)
         self.chunk_samples = chunk_samples
@@ -292,7 +334,7 @@ class Integrator:
         hit: Hit = geo.closest_hit(b.o, b.d, b.tmax)
         valid = hit.valid
         surf = geo.surface(hit, b.o, b.d)
-        p, n = surf.p, surf.n
+        p, n, n_sh = surf.p, surf.n, surf.ns
         cos_o = -dr.dot(n, b.d)              # > 0: the ray arrives on the front side
         contrib = dr.zeros(jit.Array3f, b.size())
 
@@ -309,13 +351,27 @@ class Integrator:
             mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, valid)
             kind = dr.gather(jit.UInt32, mat.kind, mid, valid)
             refl = dr.gather(jit.Array3f, mat.reflectance, mid, valid)
-            ns = dr.select(cos_o >= 0, n, -n)     # two-sided: the normal on the ray's side
+            # Two-sided: shading happens on the side the ray arrives from (judged, as
+            # Mitsuba's twosided BSDF does, by the shading normal); ray origins move off
+            # the surface along the geometric normal.
+            cos_sh = -dr.dot(n_sh, b.d)
+            nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
+            ng = dr.select(cos_o >= 0, n, -n)
             off = spawn_offset(p)
-            p_front = dr.fma(ns, off, p)
-            diffuse = valid & (kind == DIFFUSE)
-            if self.dfa is not None:  # direct light at a diffuse vertex: ... E + D + L
-                diffuse &= self._accepts(self._step(self._step(b.state, "D"), "L"))
-            f = refl * (1 / math.pi)
+            p_front = dr.fma(ng, off, p)
+            lit = valid & ((kind == DIFFUSE) | (kind == PHONG))
+            if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
+                lit &= self._accepts(self._step(self._step(b.state, "D"), "L"))
+            kd = mat.diffuse_color(mid, surf.uv, lit)
+            wo = -b.d
+            if mat.has_phong:
+                is_phong = kind == PHONG
+                ks = dr.gather(jit.Array3f, mat.ks, mid, lit & is_phong)
+                exponent = dr.gather(jit.Float, mat.exponent, mid, lit & is_phong)
+                blinn = dr.gather(jit.Bool, mat.blinn, mid, lit & is_phong)
+                if mat.has_ambient:  # tracer-only: the lecture's "cheapest of all hacks"
+                    amb = dr.gather(jit.Array3f, mat.ambient, mid, lit & is_phong)
+                    contrib += dr.select(lit & is_phong, b.weight * amb, 0)
             sources = [(light, None) for light in self.delta_lights]
             sources += [(light, stratified_2d(b.pixel, b.s, scene.film.strata,
                                               (self.seed * 64 + depth) * 4096 + light.index))
@@ -325,13 +381,24 @@ class Integrator:
                     wi, tmax, e = light.incident(p, p_front)
                 else:
                     wi, tmax, e = light.incident(p, p_front, u)
-                cos = lights.lambert_cosine(ns, wi)
-                active = diffuse & (cos > 0) & (dr.max(e) > 0)
-                blocked = geo.occluded(p_front, wi, tmax, active)
+                cos = lights.lambert_cosine(nl, wi)
+                f = kd * (1 / math.pi)
+                if mat.has_phong:
+                    fp = phong.phong_brdf(nl, wi, wo, kd, ks, exponent, "phong")
+                    if mat.has_blinn:
+                        fb = phong.phong_brdf(nl, wi, wo, kd, ks, exponent, "blinn-phong")
+                        fp = dr.select(blinn, fb, fp)
+                    f = dr.select(is_phong, fp, f)
+                active = lit & (cos > 0) & (dr.max(e) > 0)
+                # Leave the surface on the side the shadow ray goes to (as Mitsuba's
+                # spawn_ray_to does): with interpolated normals a lit direction can lie
+                # behind the geometric surface near a shadow terminator.
+                origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
+                blocked = geo.occluded(origin, wi, tmax, active)
                 contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                 shadow_masks.append(active)
             if mat.has_specular:
-                children = self._specular(b, valid, kind, refl, mid, n, ns, p, off, cos_o)
+                children = self._specular(b, valid, kind, refl, mid, n_sh, ng, p, off, cos_sh)
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
         if children is None:
@@ -360,14 +427,17 @@ class Integrator:
         w_refr = dr.select(glass & ~tir, b.weight * ((1 - r) * n_ratio * n_ratio), 0)
         r_dir = fresnel.reflect(b.d, n)
         far = dr.full(jit.Float, dr.inf, b.size())
+        # Origins leave the surface on the side each new direction goes to.
+        ng = dr.select(dr.dot(ns, r_dir) >= 0, ns, -ns)
         state = None
         if self.dfa is not None:  # a specular vertex: ... + S; dead states carry nothing
             state = self._step(b.state, "S")
             alive = state != 0
             w_refl = dr.select(alive, w_refl, 0)
             w_refr = dr.select(alive, w_refr, 0)
-        refl_b = _Batch(dr.fma(ns, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot, state)
-        refr_b = _Batch(dr.fma(ns, -off, p), t_dir, far, w_refr, b.pixel, b.s, b.slot, state)
+        refl_b = _Batch(dr.fma(ng, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot, state)
+        refr_b = _Batch(dr.fma(dr.select(dr.dot(ns, t_dir) >= 0, ns, -ns), off, p), t_dir, far,
+                        w_refr, b.pixel, b.s, b.slot, state)
         return (refl_b, refr_b, dr.max(w_refl) > self.min_weight,
                 dr.max(w_refr) > self.min_weight)
 

@@ -79,6 +79,25 @@ def sample_parallelogram(sample, center, u, v):
     return center + (2 * sample.x - 1) * u + (2 * sample.y - 1) * v
 
 
+def sample_ellipse(sample, center, u, v):
+    """Uniform point on the disk center + a u + b v, a^2 + b^2 <= 1 (an affine unit disk).
+
+    Concentric mapping of the square onto the disk (Shirley & Chiu, "A Low
+    Distortion Map Between Disk and Square", 1997): uniform in area, and
+    an affine map keeps it uniform.
+    """
+    x = 2 * sample.x - 1
+    y = 2 * sample.y - 1
+    use_x = dr.abs(x) > dr.abs(y)
+    r = dr.select(use_x, x, y)
+    safe_x = dr.select(x == 0, 1, x)
+    safe_y = dr.select(y == 0, 1, y)
+    theta = dr.select(use_x, (math.pi / 4) * (y / safe_x),
+                      (math.pi / 2) - (math.pi / 4) * (x / safe_y))
+    s, c = dr.sincos(theta)
+    return center + (r * c) * u + (r * s) * v
+
+
 def sample_triangle(sample, p0, e1, e2):
     """Uniform point on a triangle by the square-root warp (Shirley's, "Realistic Ray Tracing").
 

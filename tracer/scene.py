@@ -65,9 +65,30 @@ class Camera:
 
 
 @dataclass(frozen=True)
+class Checkerboard:
+    """Mitsuba's checkerboard texture: color0 where frac(u') > 1/2 equals frac(v') > 1/2.
+
+    (u', v') = (scale_u u, scale_v v) for the shape's own texture coordinates.
+    """
+    color0: Color = (0.4, 0.4, 0.4)
+    color1: Color = (0.2, 0.2, 0.2)
+    scale: tuple[float, float] = (1.0, 1.0)
+
+    def max(self) -> float:
+        return max(max(self.color0), max(self.color1))
+
+
+Texture = Color | Checkerboard
+
+
+def texture_max(t: Texture) -> float:
+    return t.max() if isinstance(t, Checkerboard) else max(t)
+
+
+@dataclass(frozen=True)
 class Diffuse:
     name: str
-    reflectance: Color = (0.5, 0.5, 0.5)
+    reflectance: Texture = (0.5, 0.5, 0.5)
 
 
 @dataclass(frozen=True)
@@ -88,7 +109,18 @@ class Dielectric:
         return self.ior / self.ext_ior
 
 
-Material = Diffuse | Mirror | Dielectric
+@dataclass(frozen=True)
+class Phong:
+    """kd / pi + ks N(p) cos^p: Phong (reflected direction) or Blinn-Phong (half vector)."""
+    name: str
+    diffuse: Texture = (0.5, 0.5, 0.5)
+    specular: Color = (0.2, 0.2, 0.2)
+    exponent: float = 32.0
+    model: str = "phong"               # or "blinn-phong"
+    ambient: Color = (0.0, 0.0, 0.0)   # tracer-only: radiance added at every hit
+
+
+Material = Diffuse | Mirror | Dielectric | Phong
 
 
 @dataclass(frozen=True)
@@ -131,6 +163,15 @@ class Sphere:
     radius: float
     material: str | None
     emitter: AreaEmitter | None = None
+    #: rotation of the sphere's own frame (its texture coordinates), row-major 3x3
+    rotation: Matrix = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+    def to_world(self) -> np.ndarray:
+        """The whole placement as Mitsuba builds it: rotation, uniform scale, translation."""
+        m = np.eye(4)
+        m[:3, :3] = np.asarray(self.rotation) * self.radius
+        m[:3, 3] = self.center
+        return m
 
 
 @dataclass(frozen=True)
@@ -158,7 +199,98 @@ class Triangle:
     emitter: AreaEmitter | None = None
 
 
-Shape = Sphere | Rectangle | Triangle
+@dataclass(frozen=True)
+class Disk:
+    """Mitsuba's disk: the unit disk in local xy, normal +z, placed by ``to_world``."""
+    to_world: Matrix
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre and the images of local +x and +y (the disk's two radii) in world space."""
+        m = np.asarray(self.to_world)
+        c = tf.apply_point(m, (0, 0, 0))
+        return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
+
+    def normal(self) -> np.ndarray:
+        n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
+        return n / np.linalg.norm(n)
+
+
+@dataclass(frozen=True)
+class Cylinder:
+    """Mitsuba's open cylinder from p0 to p1 with a radius, then ``to_world``."""
+    p0: Vec3
+    p1: Vec3
+    radius: float
+    to_world: Matrix
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+    def local_to_world(self) -> np.ndarray:
+        """Unit cylinder x^2 + y^2 = 1, 0 <= z <= 1 to world, composed as Mitsuba does."""
+        d = np.subtract(self.p1, self.p0)
+        length = float(np.linalg.norm(d))
+        frame = np.eye(4)
+        s_, t_ = _mitsuba_frame(d / length)
+        frame[:3, 0], frame[:3, 1], frame[:3, 2] = s_, t_, d / length
+        return (np.asarray(self.to_world) @ tf.translate(self.p0) @ frame
+                @ tf.scale((self.radius, self.radius, length)))
+
+
+@dataclass(frozen=True)
+class Paraboloid:
+    """z = x^2 / a^2 + y^2 / b^2 for 0 <= z <= height in local space, placed by ``to_world``."""
+    a: float
+    b: float
+    height: float
+    to_world: Matrix
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+
+@dataclass(frozen=True)
+class Polygon:
+    """A planar polygon (convex or not), vertices in world space after ``to_world``."""
+    vertices: tuple[Vec3, ...]
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+
+@dataclass(frozen=True, eq=False)
+class Mesh:
+    """A triangle mesh from an OBJ or PLY file, in world space after ``to_world``."""
+    file: str
+    smooth: bool
+    vertices: np.ndarray       # (V, 3) world space
+    faces: np.ndarray          # (F, 3)
+    normals: np.ndarray | None  # (V, 3) world space, unit; None: face normals
+    uvs: np.ndarray | None     # (V, 2)
+    to_world: Matrix
+    material: str | None
+    emitter: AreaEmitter | None = None
+
+
+@dataclass(frozen=True)
+class Instance:
+    """A group of shapes placed by ``to_world`` (the group's own shapes are in object space)."""
+    group: str
+    to_world: Matrix
+    material: str | None = None
+    emitter: AreaEmitter | None = None
+
+
+Shape = (Sphere | Rectangle | Triangle | Disk | Cylinder | Paraboloid | Polygon | Mesh
+         | Instance)
+
+
+def _mitsuba_frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The tangents Mitsuba's Frame3f(n) chooses (Duff et al. 2017), so that uv agree."""
+    sign = 1.0 if n[2] >= 0 else -1.0
+    a = -1.0 / (sign + n[2])
+    b = n[0] * n[1] * a
+    return (np.array([1 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]]),
+            np.array([b, sign + n[1] * n[1] * a, -n[1]]))
 
 
 @dataclass(frozen=True)
@@ -172,6 +304,8 @@ class Scene:
     description: str = ""
     #: parts of the scene that only the tracer models (``[compare] tracer_only``)
     tracer_only: tuple[str, ...] = ()
+    #: named groups of shapes for ``instance`` shapes (object space)
+    groups: dict[str, tuple] = field(default_factory=dict)
     extra: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -193,18 +327,39 @@ class Scene:
     def material_of(self, shape: Shape) -> Material | None:
         return None if shape.material is None else self.materials[shape.material]
 
+    def all_shapes(self) -> list:
+        """Every shape: the top-level ones and those of the groups that instances use."""
+        out = list(self.shapes)
+        for s in self.shapes:
+            if isinstance(s, Instance):
+                out += list(self.groups[s.group])
+        return out
+
+    def used_materials(self) -> list:
+        names = {s.material for s in self.all_shapes() if s.material is not None}
+        return [m for k, m in self.materials.items() if k in names]
+
     def has_specular(self) -> bool:
-        used = {s.material for s in self.shapes}
-        return any(isinstance(self.materials[m], (Mirror, Dielectric))
-                   for m in used if m is not None)
+        return any(isinstance(m, (Mirror, Dielectric)) for m in self.used_materials())
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
 
     def uses_schlick(self) -> bool:
-        used = {s.material for s in self.shapes}
         return any(isinstance(m, Dielectric) and m.fresnel == "schlick"
-                   for name, m in self.materials.items() if name in used)
+                   for m in self.used_materials())
+
+    def uses_ambient(self) -> bool:
+        return any(isinstance(m, Phong) and any(m.ambient) for m in self.used_materials())
+
+    def uses_textures(self) -> bool:
+        return any(isinstance(getattr(m, "reflectance", None), Checkerboard) or
+                   isinstance(getattr(m, "diffuse", None), Checkerboard)
+                   for m in self.used_materials())
+
+    def has_tessellated(self) -> bool:
+        """Shapes Mitsuba lacks, which the conversion tessellates (paraboloids)."""
+        return any(isinstance(s, Paraboloid) for s in self.all_shapes())
 
 
 # ---------------------------------------------------------------------------
@@ -341,13 +496,17 @@ def _vec3(t: _Table, key: str, v, nonzero: bool = False) -> Vec3:
     return out
 
 
-SHAPE_TYPES = ("sphere", "rectangle", "triangle")
-MATERIAL_TYPES = ("diffuse", "mirror", "dielectric")
+SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
+               "mesh", "instance")
+MATERIAL_TYPES = ("diffuse", "mirror", "dielectric", "phong")
+#: Shapes that may carry an area emitter (the tracer samples them).
+EMITTER_SHAPES = ("sphere", "rectangle", "triangle", "disk")
 LIGHT_TYPES = ("point", "directional", "spot")
 CAMERA_TYPES = ("perspective", "orthographic")
-TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare")
+TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare",
+             "groups")
 #: Features a scene may declare tracer-only: Mitsuba has no counterpart.
-TRACER_ONLY = ("schlick",)
+TRACER_ONLY = ("schlick", "ambient")
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -384,8 +543,20 @@ def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     mats_t.finish()
 
     lights = tuple(_parse_light(t) for t in _array_of_tables(top, "lights"))
+    base = Path(path).parent
+    groups_t = top.table("groups", {})
+    groups: dict[str, tuple] = {}
+    for gname in list(groups_t.data):
+        g = groups_t.table(gname)
+        members = _array_of_tables(g, "shapes")
+        if not members:
+            g.fail("shapes", "expected at least one [[groups.NAME.shapes]] table")
+        groups[gname] = tuple(_parse_shape(m, materials, {}, base, in_group=True)
+                              for m in members)
+        g.finish()
+    groups_t.finish()
     shapes_t = _array_of_tables(top, "shapes")
-    shapes = tuple(_parse_shape(t, materials) for t in shapes_t)
+    shapes = tuple(_parse_shape(t, materials, groups, base) for t in shapes_t)
     cmp_t = top.table("compare", {})
     tracer_only = cmp_t.raw("tracer_only", [])
     if not isinstance(tracer_only, list) or any(x not in TRACER_ONLY for x in tracer_only):
@@ -394,14 +565,15 @@ def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     cmp_t.finish()
     top.finish()
     return Scene(path=path, film=film, camera=camera, materials=materials, lights=lights,
-                 shapes=shapes, description=description, tracer_only=tuple(tracer_only))
+                 shapes=shapes, description=description, tracer_only=tuple(tracer_only),
+                 groups=groups)
 
 
 def _array_of_tables(top: _Table, key: str) -> list[_Table]:
     v = top.raw(key, [])
     if not isinstance(v, list):
         top.fail(key, f"expected an array of tables ([[{key}]]), got {_show(v)}")
-    return [_Table(top.path, f"{key}[{i}]", x) for i, x in enumerate(v)]
+    return [_Table(top.path, f"{top._k(key)}[{i}]", x) for i, x in enumerate(v)]
 
 
 def _parse_film(t: _Table) -> Film:
@@ -437,16 +609,50 @@ def _parse_camera(t: _Table) -> Camera:
     return cam
 
 
+def _texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Texture:
+    """A colour, or ``{ checkerboard = { color0, color1, scale } }``."""
+    v = t.raw(key, default, "a colour or { checkerboard = {...} }")
+    if isinstance(v, dict):
+        tex = _Table(t.path, t._k(key), v)
+        cb = tex.table("checkerboard")
+        sc = cb.raw("scale", 1.0)
+        if isinstance(sc, (int, float)) and not isinstance(sc, bool):
+            sc = [sc, sc]
+        if (not isinstance(sc, list) or len(sc) != 2 or
+                any(isinstance(x, bool) or not isinstance(x, (int, float)) or
+                    not math.isfinite(x) or x <= 0 for x in sc)):
+            cb.fail("scale", f"expected a positive number or [su, sv], got {_show(sc)}")
+        board = Checkerboard(cb.color("color0", 0.4, hi=hi), cb.color("color1", 0.2, hi=hi),
+                             (float(sc[0]), float(sc[1])))
+        cb.finish()
+        tex.finish(" (textures: checkerboard)")
+        return board
+    return t.color(key, default, hi=hi)
+
+
 def _parse_material(t: _Table, name: str) -> Material:
     kind = t.string("type", choices=MATERIAL_TYPES)
     if kind == "diffuse":
-        m = Diffuse(name, t.color("reflectance", 0.5, hi=1.0))
+        m = Diffuse(name, _texture(t, "reflectance", 0.5))
     elif kind == "mirror":
         m = Mirror(name, t.color("reflectance", 1.0, hi=1.0))
-    else:
+    elif kind == "dielectric":
         m = Dielectric(name, ior=t.number("ior", 1.5, lo=0, lo_open=True),
                        ext_ior=t.number("ext_ior", 1.0, lo=0, lo_open=True),
                        fresnel=t.string("fresnel", "exact", ("exact", "schlick")))
+    else:
+        diffuse = _texture(t, "diffuse", 0.5)
+        specular = t.color("specular", 0.2, hi=1.0)
+        m = Phong(name, diffuse, specular,
+                  exponent=t.number("exponent", 32.0, lo=0, lo_open=True, hi=1e4),
+                  model=t.string("model", "phong", ("phong", "blinn-phong")),
+                  ambient=t.color("ambient", 0.0))
+        kd = diffuse.color0 if isinstance(diffuse, Checkerboard) else diffuse
+        kds = [diffuse.color0, diffuse.color1] if isinstance(diffuse, Checkerboard) else [kd]
+        for k in kds:
+            if any(a + b > 1 + 1e-9 for a, b in zip(k, specular, strict=True)):
+                t.fail("specular", "expected diffuse + specular <= 1 in every channel "
+                                   "(beyond that the BRDF creates energy)")
     t.finish()
     return m
 
@@ -525,14 +731,26 @@ def _as_tuple(m: np.ndarray) -> Matrix:
     return tuple(tuple(float(x) for x in row) for row in m)
 
 
-def _parse_shape(t: _Table, materials: dict[str, Material]) -> Shape:
+def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
+                 base: Path, in_group: bool = False) -> Shape:
     kind = t.string("type", choices=SHAPE_TYPES)
+    if in_group and kind == "instance":
+        t.fail("type", "a group may not contain instances (nested instancing is not supported)")
     emitter = None
     if t.has("emitter"):
+        if kind not in EMITTER_SHAPES or in_group:
+            t.fail("emitter", "area lights are supported on " + ", ".join(EMITTER_SHAPES) +
+                   (" outside groups" if in_group else "") + f", not on a {kind}")
         e = t.table("emitter")
         emitter = AreaEmitter(e.color("radiance"))
         e.finish()
-    if emitter is None or t.has("material"):
+    if kind == "instance":
+        material = None
+        group = t.string("group")
+        if group not in groups:
+            known = ", ".join(sorted(groups)) or "none"
+            t.fail("group", f'unknown group "{group}" (defined: {known})')
+    elif emitter is None or t.has("material"):
         material = t.string("material")
         if material not in materials:
             known = ", ".join(sorted(materials)) or "none"
@@ -546,20 +764,99 @@ def _parse_shape(t: _Table, materials: dict[str, Material]) -> Shape:
         if not tf.is_similarity(m) or np.linalg.det(m[:3, :3]) < 0:
             t.fail("to_world", "a sphere takes only translations, rotations and uniform "
                                "positive scales (the result must stay a sphere)")
-        world_center = tf.apply_point(m, center)
-        world_radius = radius * float(np.linalg.norm(m[:3, 0]))
-        shape = Sphere(tuple(float(x) for x in world_center), world_radius, material, emitter)
+        scale = float(np.linalg.norm(m[:3, 0]))
+        shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
+                       material, emitter, _as_tuple(m[:3, :3] / scale))
     elif kind == "rectangle":
         shape = Rectangle(_as_tuple(m), material, emitter)
-    else:
-        v = t.raw("vertices", ..., "a list of 3 vertices [[x, y, z], [x, y, z], [x, y, z]]")
-        if not isinstance(v, list) or len(v) != 3:
-            got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
-            t.fail("vertices", f"expected a list of 3 vertices [[x, y, z], ...], got {got}")
-        verts = [tf.apply_point(m, _vec3(t, f"vertices[{i}]", p)) for i, p in enumerate(v)]
+    elif kind == "disk":
+        shape = Disk(_as_tuple(m), material, emitter)
+    elif kind == "triangle":
+        verts = _points(t, "vertices", m, exactly=3)
         if np.linalg.norm(np.cross(verts[1] - verts[0], verts[2] - verts[0])) == 0:
             t.fail("vertices", "expected a triangle with non-zero area "
                                "(the vertices are collinear)")
         shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
+    elif kind == "polygon":
+        verts = _points(t, "vertices", m)
+        _check_polygon(t, verts)
+        shape = Polygon(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
+    elif kind == "cylinder":
+        p0, p1 = t.vec3("p0", [0.0, 0.0, 0.0]), t.vec3("p1", [0.0, 0.0, 1.0])
+        if p0 == p1:
+            t.fail("p1", "expected a point different from p0")
+        shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), _as_tuple(m),
+                         material, emitter)
+        lin = shape.local_to_world()[:3, :3]
+        x, y, z = lin[:, 0], lin[:, 1], lin[:, 2]
+        tol = 1e-6 * max(np.linalg.norm(x), np.linalg.norm(z))
+        if (abs(np.dot(x, y)) > tol * np.linalg.norm(y) or abs(np.dot(x, z)) > tol *
+                np.linalg.norm(z) or abs(np.dot(y, z)) > tol * np.linalg.norm(z) or
+                abs(np.linalg.norm(x) - np.linalg.norm(y)) > tol or np.linalg.det(lin) < 0):
+            t.fail("to_world", "a cylinder's to_world may not shear it, mirror it or scale its "
+                               "cross-section unevenly (Mitsuba's cylinder does not support it)")
+    elif kind == "paraboloid":
+        shape = Paraboloid(t.number("a", 1.0, lo=0, lo_open=True),
+                           t.number("b", 1.0, lo=0, lo_open=True),
+                           t.number("height", 1.0, lo=0, lo_open=True), _as_tuple(m),
+                           material, emitter)
+    elif kind == "mesh":
+        shape = _parse_mesh(t, m, material, emitter, base)
+    else:
+        shape = Instance(group, _as_tuple(m))
     t.finish()
     return shape
+
+
+def _points(t: _Table, key: str, m: np.ndarray, exactly: int | None = None) -> list:
+    what = (f"a list of {exactly} vertices [[x, y, z], ...]" if exactly
+            else "a list of at least 3 vertices [[x, y, z], ...]")
+    v = t.raw(key, ..., what)
+    if not isinstance(v, list) or (len(v) != exactly if exactly else len(v) < 3):
+        got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
+        t.fail(key, f"expected {what}, got {got}")
+    return [tf.apply_point(m, _vec3(t, f"{key}[{i}]", p)) for i, p in enumerate(v)]
+
+
+def _check_polygon(t: _Table, verts: list) -> None:
+    """Planar, not degenerate and simple (no edge crosses another)."""
+    from tracer.shapes.polygon import plane_frame, self_intersects
+
+    pts = np.asarray(verts)
+    frame = plane_frame(pts)
+    if frame is None:
+        t.fail("vertices", "expected a polygon with non-zero area")
+    origin, u, v, n = frame
+    size = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))
+    off = np.abs((pts - origin) @ n)
+    if off.max() > 1e-6 * size:
+        t.fail("vertices", f"expected a planar polygon (a vertex lies {off.max():.3g} "
+                           "off the plane of the others)")
+    if self_intersects((pts - origin) @ np.stack([u, v], axis=1)):
+        t.fail("vertices", "expected a simple polygon (two of its edges cross)")
+
+
+def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh:
+    from tracer.meshio import MeshError, compute_vertex_normals, load_mesh
+
+    name = t.string("file")
+    path = Path(name) if Path(name).is_absolute() else base / name
+    if not path.is_file():
+        t.fail("file", f"no such mesh file: {path}")
+    smooth = t.raw("smooth", True)
+    if not isinstance(smooth, bool):
+        t.fail("smooth", f"expected true or false, got {_show(smooth)}")
+    try:
+        data = load_mesh(path)
+    except MeshError as e:
+        t.fail("file", str(e))
+    verts = tf.apply_point(m, data.vertices)
+    normals = None
+    if smooth:
+        if data.normals is not None:  # normals transform by the inverse transpose
+            normals = tf.apply_normal(m, data.normals)
+        else:  # as Mitsuba does: from the faces, after to_world
+            normals = compute_vertex_normals(verts, data.faces)
+        normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+    return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
+                _as_tuple(m), material, emitter)

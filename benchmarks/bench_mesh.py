@@ -1,0 +1,131 @@
+"""Time the tracer's BVH against Mitsuba (Embree on the CPU) on the same large mesh, in one run.
+
+Generates a torus-knot mesh of 2 x segments x sides triangles (default 144,000),
+places it in a scene lit by a point light, and renders it with the tracer and
+with Mitsuba's `direct` integrator at the same size and samples per pixel.
+Prints the BVH build time, the median render times after a warm-up, and
+their ratio (the target: the tracer within 3x of Mitsuba).
+
+    python benchmarks/bench_mesh.py [--segments 1200] [--sides 60] [--size 640x480] [--spp 16]
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT))
+
+import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+
+SCENE = """
+[film]
+width = {w}
+height = {h}
+spp = {spp}
+max_depth = 2
+
+[camera]
+origin = [0, 2.6, 6]
+target = [0, 0.7, 0]
+fov = 40
+
+[materials.copper]
+type = "diffuse"
+reflectance = [0.6, 0.3, 0.15]
+
+[materials.floor]
+type = "diffuse"
+reflectance = 0.5
+
+[[lights]]
+type = "point"
+position = [-3, 5, 4]
+intensity = 80
+
+[[shapes]]
+type = "mesh"
+file = "{mesh}"
+smooth = true
+material = "copper"
+to_world = [ {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}, {{ translate = [0, 1.0, 0] }} ]
+
+[[shapes]]
+type = "rectangle"
+material = "floor"
+to_world = [ {{ scale = 6 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }} ]
+"""
+
+
+def main(argv=None) -> int:
+    from reference.cli import _size
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--segments", type=int, default=1200)
+    p.add_argument("--sides", type=int, default=60)
+    p.add_argument("--size", type=_size, default=(640, 480))
+    p.add_argument("--spp", type=int, default=16)
+    p.add_argument("--repeat", type=int, default=5)
+    p.add_argument("--backend", default=None)
+    args = p.parse_args(argv)
+
+    sys.path.insert(0, str(ROOT / "scenes" / "meshes"))
+    import drjit as dr
+    from generate import torus_knot, write_ply
+
+    from reference import mitsuba
+    from reference.mitsuba_scene import load
+    from tracer import backend, load_scene
+    from tracer.integrator import Integrator
+
+    name = backend.use(args.backend)
+    with tempfile.TemporaryDirectory() as tmp:
+        v, f = torus_knot(args.segments, args.sides)
+        mesh = Path(tmp) / "knot.ply"
+        write_ply(mesh, v, f)
+        scene_file = Path(tmp) / "scene.toml"
+        w, h = args.size
+        scene_file.write_text(SCENE.format(w=w, h=h, spp=args.spp, mesh=mesh))
+        t0 = time.perf_counter()
+        scene = load_scene(scene_file)
+        load_s = time.perf_counter() - t0
+        integ = Integrator(scene)
+        bvh = next(b for b in integ.geo.blocks if hasattr(b, "bvh")).bvh
+        mi = mitsuba()
+        t0 = time.perf_counter()
+        ms = load(scene, mi, "direct")
+        mi_load_s = time.perf_counter() - t0
+        spp = scene.film.strata ** 2
+
+        def timed(fn):
+            fn()
+            out = []
+            for _ in range(args.repeat):
+                t0 = time.perf_counter()
+                fn()
+                out.append(time.perf_counter() - t0)
+            return statistics.median(out)
+
+        def run_mitsuba():
+            img = mi.render(ms, spp=spp)
+            dr.eval(img)
+            dr.sync_thread()
+
+        t_tracer = timed(integ.render)
+        t_mitsuba = timed(run_mitsuba)
+    print(f"mesh: {len(f):,} triangles; scene {w}x{h}, {spp} spp, backend {name}")
+    print(f"  BVH build (numpy)          {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes)"
+          f"; scene load incl. PLY {load_s:.3f} s; Mitsuba scene load {mi_load_s:.3f} s")
+    print(f"  tracer render              {t_tracer:8.3f} s (median of {args.repeat})")
+    print(f"  Mitsuba direct (Embree)    {t_mitsuba:8.3f} s")
+    print(f"  ratio tracer / Mitsuba = {t_tracer / t_mitsuba:.2f} (target: within 3)")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

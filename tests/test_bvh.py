@@ -1,0 +1,296 @@
+"""The BVH finds what testing every triangle finds, and its tree keeps its invariants.
+
+The reference is brute force: every ray against every triangle with
+tracer.shapes.triangle.intersect, the same test on the same float32 numbers
+as the BVH's leaves. Both take the minimum of the same per-triangle t
+values, so they agree exactly unless the BVH wrongly skips a triangle; the
+tolerance below only absorbs a compiler contracting a product and a sum into
+one fused multiply-add in one kernel and not the other.
+"""
+
+import math
+
+import drjit as dr
+import numpy as np
+import pytest
+
+from tracer.bvh import BVH, INVALID, build_bvh
+from tracer.shapes import triangle as tri_f
+
+#: Relative tolerance on t: a few float32 roundings (2^-24 each) that may differ
+#: between the two kernels, times the condition of the solve for non-grazing hits.
+T_REL = 1e-5
+
+
+def v3(jit, a):
+    a = np.asarray(a, dtype=np.float32).reshape(-1, 3)
+    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+
+
+@dr.syntax
+def _brute_loop(jit, o, d, p0, e1, e2, t, tri, count):
+    i = jit.UInt32(0)
+    while i < count:
+        ti, hit, _, _ = tri_f.intersect(o, d, dr.gather(jit.Array3f, p0, i),
+                                        dr.gather(jit.Array3f, e1, i),
+                                        dr.gather(jit.Array3f, e2, i), t)
+        t = dr.select(hit, ti, t)
+        tri = dr.select(hit, i, tri)
+        i += 1
+    return t, tri
+
+
+def brute_force(jit, p0, p1, p2, o, d, tmax):
+    """(t, tri) of the nearest hit of each ray over all triangles, lowest index on ties."""
+    n = len(o)
+    t = jit.Float(np.broadcast_to(np.float32(tmax), (n,)).copy())
+    tri = dr.full(jit.UInt32, INVALID, n)
+    # The edges as BVH stores them: float64 differences rounded once.
+    t, tri = _brute_loop(jit, v3(jit, o), v3(jit, d), v3(jit, p0), v3(jit, p1 - p0),
+                         v3(jit, p2 - p0), t, tri, dr.opaque(jit.UInt32, len(p0)))
+    return t.numpy(), tri.numpy()
+
+
+def trace(jit, bvh, o, d, tmax, active=True):
+    t, tri, beta, gamma = bvh.closest_hit(v3(jit, o), v3(jit, d), jit.Float(tmax), active)
+    return t.numpy(), tri.numpy(), beta.numpy(), gamma.numpy()
+
+
+def assert_same_hits(t, tri, t_ref, tri_ref):
+    """Same nearest hit: the same triangle, or a tie (equal t) with another one."""
+    hit, hit_ref = tri != INVALID, tri_ref != INVALID
+    np.testing.assert_array_equal(hit, hit_ref)
+    np.testing.assert_allclose(t[hit], t_ref[hit], rtol=T_REL, atol=0)
+    differ = hit & (tri != tri_ref)
+    # Ties are rare (a ray through a shared edge or vertex, or coincident triangles).
+    assert differ.sum() <= max(3, hit.sum() // 1000), f"{differ.sum()} different triangles"
+
+
+def random_rays(rng, n, lo, hi, spread=0.3):
+    """Origins in the box [lo, hi] widened by ``spread`` of its size (inside and outside
+    the geometry), random directions of random length."""
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    size = hi - lo
+    o = lo - spread * size + rng.random((n, 3)) * (1 + 2 * spread) * size
+    d = rng.normal(size=(n, 3)) * rng.uniform(0.2, 5.0, (n, 1))
+    return o, d
+
+
+def soup(rng, n, scale=0.3):
+    c = rng.uniform(-1, 1, (n, 3))
+    return tuple(c + rng.normal(size=(n, 3)) * scale for _ in range(3))
+
+
+def torus(nu, nv, big=1.0, small=0.35):
+    """A torus of 2 nu nv triangles (shared vertices), counter-clockwise seen from outside."""
+    u = np.linspace(0, 2 * np.pi, nu, endpoint=False)
+    v = np.linspace(0, 2 * np.pi, nv, endpoint=False)
+    uu, vv = np.meshgrid(u, v, indexing="ij")
+    p = np.stack([(big + small * np.cos(vv)) * np.cos(uu),
+                  (big + small * np.cos(vv)) * np.sin(uu),
+                  small * np.sin(vv)], -1).reshape(-1, 3)
+    i, j = np.meshgrid(np.arange(nu), np.arange(nv), indexing="ij")
+    a, b = i * nv + j, ((i + 1) % nu) * nv + j
+    c, e = ((i + 1) % nu) * nv + (j + 1) % nv, i * nv + (j + 1) % nv
+    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                        np.stack([a, c, e], -1).reshape(-1, 3)])
+    return p, f
+
+
+def check_tree(b, p0, p1, p2, max_leaf):
+    """The invariants of a BVHArrays for triangles (p0, p1, p2)."""
+    n = len(p0)
+    leaf = b.left < 0
+    inner = ~leaf
+    # Every triangle in exactly one leaf: the leaves' ranges tile order[0:n], a permutation.
+    np.testing.assert_array_equal(np.sort(b.order), np.arange(n))
+    starts, counts = b.start[leaf], b.count[leaf]
+    ranges = np.sort(np.stack([starts, starts + counts], 1), axis=0)
+    assert ranges[0, 0] == 0 and ranges[-1, 1] == n
+    np.testing.assert_array_equal(ranges[1:, 0], ranges[:-1, 1])
+    assert counts.min() >= 1 and counts.max() <= max_leaf
+    assert (b.count[inner] == 0).all()
+    # Every node but the root is the child of exactly one inner node; depth-first order.
+    kids = np.concatenate([b.left[inner], b.right[inner]])
+    np.testing.assert_array_equal(np.sort(kids), np.arange(1, len(b.left)))
+    np.testing.assert_array_equal(b.left[inner], np.flatnonzero(inner) + 1)
+    # Every child box inside its parent box, every triangle inside its leaf's box.
+    for child in (b.left[inner], b.right[inner]):
+        assert (b.lo[child] >= b.lo[inner]).all() and (b.hi[child] <= b.hi[inner]).all()
+    owner = np.repeat(np.flatnonzero(leaf), counts)
+    tri = b.order[np.concatenate([np.arange(s, s + c) for s, c in zip(starts, counts,
+                                                                      strict=True)])]
+    for p in (p0, p1, p2):
+        assert (p[tri] >= b.lo[owner]).all() and (p[tri] <= b.hi[owner]).all()
+    # The root holds everything; the depth is the longest root-to-leaf path.
+    np.testing.assert_array_equal(b.lo[0], np.minimum(np.minimum(p0, p1), p2).min(0))
+    np.testing.assert_array_equal(b.hi[0], np.maximum(np.maximum(p0, p1), p2).max(0))
+    depth = np.zeros(len(b.left), int)
+    for i in np.flatnonzero(inner):  # parents come before children (depth-first order)
+        depth[b.left[i]] = depth[b.right[i]] = depth[i] + 1
+    assert depth.max() == b.depth
+
+
+# --------------------------------------------------------------------------- tree
+
+
+@pytest.mark.parametrize("n", [1, 2, 5, 64, 3000])
+def test_tree_invariants_every_triangle_in_one_leaf_children_inside_parents(n):
+    rng = np.random.default_rng(n)
+    p0, p1, p2 = soup(rng, n)
+    b = build_bvh(p0, p1, p2, max_leaf=4)
+    check_tree(b, p0, p1, p2, 4)
+
+
+def test_tree_invariants_hold_for_coincident_triangles_split_by_median():
+    # All centroids equal: no SAH split exists, the median of the list is used.
+    p0 = np.zeros((50, 3))
+    p1 = np.tile([1.0, 0, 0], (50, 1))
+    p2 = np.tile([0, 1.0, 0], (50, 1))
+    b = build_bvh(p0, p1, p2, max_leaf=3)
+    check_tree(b, p0, p1, p2, 3)
+
+
+def test_torus_tree_invariants_and_build_time(record_property):
+    p, f = torus(320, 160)  # 102,400 triangles
+    p0, p1, p2 = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    b = build_bvh(p0, p1, p2)
+    check_tree(b, p0, p1, p2, 4)
+    print(f"BVH build: {len(f)} triangles in {b.seconds:.2f} s, {len(b.left)} nodes, "
+          f"depth {b.depth}")
+    record_property("bvh_build_seconds_102400", round(b.seconds, 3))
+
+
+# --------------------------------------------------------------------------- queries
+
+
+@pytest.mark.parametrize("seed,n", [(0, 1), (1, 7), (2, 60), (3, 500)])
+def test_closest_hit_equals_brute_force_on_random_soups(jit, seed, n):
+    rng = np.random.default_rng(seed)
+    p0, p1, p2 = soup(rng, n)
+    bvh = BVH(p0, p1, p2)
+    o, d = random_rays(rng, 4000, [-1.3] * 3, [1.3] * 3)
+    t, tri, _, _ = trace(jit, bvh, o, d, math.inf)
+    t_ref, tri_ref = brute_force(jit, p0, p1, p2, o, d, math.inf)
+    assert (tri_ref != INVALID).any() and (tri_ref == INVALID).any()  # hits and misses
+    assert_same_hits(t, tri, t_ref, tri_ref)
+
+
+def test_closest_hit_equals_brute_force_on_a_100k_triangle_torus(jit):
+    p, f = torus(320, 160)
+    p0, p1, p2 = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    bvh = BVH(p0, p1, p2)
+    rng = np.random.default_rng(7)
+    # Origins around and inside the torus's bounds (many inside the tube or the hole).
+    o, d = random_rays(rng, 1536, [-1.35, -1.35, -0.35], [1.35, 1.35, 0.35], spread=0.2)
+    t, tri, _, _ = trace(jit, bvh, o, d, math.inf)
+    t_ref, tri_ref = brute_force(jit, p0, p1, p2, o, d, math.inf)
+    assert 0.2 < (tri_ref != INVALID).mean() < 0.95
+    assert_same_hits(t, tri, t_ref, tri_ref)
+    assert bvh.triangle_count == len(f) and bvh.node_count == len(bvh.arrays.left)
+    print(f"BVH build: {len(f)} triangles in {bvh.build_seconds:.2f} s")
+
+
+def test_closest_hit_respects_tmax_and_returns_tmax_on_a_miss(jit):
+    rng = np.random.default_rng(11)
+    p0, p1, p2 = soup(rng, 200)
+    bvh = BVH(p0, p1, p2)
+    o, d = random_rays(rng, 3000, [-1] * 3, [1] * 3)
+    tmax = rng.uniform(0.0, 2.0, len(o)).astype(np.float32)
+    t, tri, _, _ = trace(jit, bvh, o, d, tmax)
+    t_ref, tri_ref = brute_force(jit, p0, p1, p2, o, d, tmax)
+    assert_same_hits(t, tri, t_ref, tri_ref)
+    miss = tri == INVALID
+    np.testing.assert_array_equal(t[miss], tmax[miss])
+    assert (t[~miss] > 0).all() and (t[~miss] < tmax[~miss]).all()
+
+
+def test_barycentrics_are_those_of_the_triangle_test(jit):
+    rng = np.random.default_rng(5)
+    p0, p1, p2 = soup(rng, 300)
+    bvh = BVH(p0, p1, p2)
+    o, d = random_rays(rng, 2000, [-1] * 3, [1] * 3)
+    t, tri, beta, gamma = trace(jit, bvh, o, d, math.inf)
+    hit = np.flatnonzero(tri != INVALID)
+    k = tri[hit]
+    t2, ok, b2, g2 = tri_f.intersect(v3(jit, o[hit]), v3(jit, d[hit]), v3(jit, p0[k]),
+                                     v3(jit, p1[k] - p0[k]), v3(jit, p2[k] - p0[k]),
+                                     jit.Float(math.inf))
+    assert ok.numpy().all()
+    np.testing.assert_allclose(beta[hit], b2.numpy(), rtol=T_REL, atol=1e-6)
+    np.testing.assert_allclose(gamma[hit], g2.numpy(), rtol=T_REL, atol=1e-6)
+    assert (beta[hit] >= 0).all() and (gamma[hit] >= 0).all()
+    assert (beta[hit] + gamma[hit] <= 1).all()
+
+
+def test_inactive_rays_report_a_miss(jit):
+    rng = np.random.default_rng(2)
+    p0, p1, p2 = soup(rng, 100)
+    bvh = BVH(p0, p1, p2)
+    o, d = random_rays(rng, 1000, [-1] * 3, [1] * 3)
+    active = rng.random(len(o)) < 0.5
+    t, tri, _, _ = trace(jit, bvh, o, d, math.inf, jit.Bool(active))
+    t_all, tri_all, _, _ = trace(jit, bvh, o, d, math.inf)
+    assert (tri[~active] == INVALID).all() and np.isinf(t[~active]).all()
+    np.testing.assert_array_equal(tri[active], tri_all[active])
+    np.testing.assert_array_equal(t[active], t_all[active])
+
+
+def test_axis_parallel_rays_hit_axis_aligned_triangles(jit):
+    # Flat boxes and direction components of exactly zero: the slab test's hard cases.
+    n = 10
+    x, y = np.meshgrid(np.arange(n, dtype=float), np.arange(n, dtype=float))
+    x, y = x.ravel(), y.ravel()
+    z = np.zeros_like(x)
+    p0 = np.stack([x, y, z], 1)
+    p1 = np.stack([x + 1, y, z], 1)
+    p2 = np.stack([x, y + 1, z], 1)
+    bvh = BVH(p0, p1, p2)
+    rng = np.random.default_rng(3)
+    m = 2000
+    o = np.stack([rng.uniform(0, n, m), rng.uniform(0, n, m), np.full(m, 2.0)], 1)
+    d = np.tile([0.0, 0.0, -1.0], (m, 1))
+    t, tri, _, _ = trace(jit, bvh, o, d, math.inf)
+    t_ref, tri_ref = brute_force(jit, p0, p1, p2, o, d, math.inf)
+    assert_same_hits(t, tri, t_ref, tri_ref)
+    # Rays in the plane of the triangles (along x, z = 0) and beside them.
+    o2 = np.stack([np.full(m, -1.0), rng.uniform(0, n, m), rng.choice([0.0, 1e-3], m)], 1)
+    d2 = np.tile([1.0, 0.0, 0.0], (m, 1))
+    t, tri, _, _ = trace(jit, bvh, o2, d2, math.inf)
+    t_ref, tri_ref = brute_force(jit, p0, p1, p2, o2, d2, math.inf)
+    assert_same_hits(t, tri, t_ref, tri_ref)
+
+
+def test_occluded_agrees_with_closest_hit(jit):
+    p, f = torus(60, 30)
+    p0, p1, p2 = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
+    bvh = BVH(p0, p1, p2)
+    rng = np.random.default_rng(9)
+    o, d = random_rays(rng, 5000, [-1.35, -1.35, -0.35], [1.35, 1.35, 0.35])
+    tmax = jit.Float(rng.uniform(0.0, 3.0, len(o)).astype(np.float32))
+    occ = bvh.occluded(v3(jit, o), v3(jit, d), tmax).numpy()
+    _, tri, _, _ = bvh.closest_hit(v3(jit, o), v3(jit, d), tmax)
+    np.testing.assert_array_equal(occ, tri.numpy() != INVALID)
+    assert occ.any() and not occ.all()
+    active = rng.random(len(o)) < 0.5
+    occ_a = bvh.occluded(v3(jit, o), v3(jit, d), tmax, jit.Bool(active)).numpy()
+    np.testing.assert_array_equal(occ_a, occ & active)
+
+
+def test_empty_bvh_misses_everything(jit):
+    empty = np.zeros((0, 3))
+    bvh = BVH(empty, empty, empty)
+    t, tri, _, _ = trace(jit, bvh, np.zeros((4, 3)), np.ones((4, 3)), 5.0)
+    assert (tri == INVALID).all() and (t == 5.0).all()
+    assert not bvh.occluded(v3(jit, np.zeros((4, 3))), v3(jit, np.ones((4, 3))),
+                            jit.Float(5.0)).numpy().any()
+
+
+def test_bad_input_is_refused():
+    p = np.zeros((2, 3))
+    with pytest.raises(ValueError, match="same number"):
+        build_bvh(p, p, np.zeros((3, 3)))
+    with pytest.raises(ValueError, match="finite"):
+        build_bvh(p, p, np.full((2, 3), np.nan))
+    with pytest.raises(ValueError, match="max_leaf"):
+        build_bvh(p, p, p, max_leaf=8)
