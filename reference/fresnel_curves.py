@@ -176,6 +176,7 @@ def fresnel_table(iors=DEFAULT_IORS, step: float = 0.5, samples: int = 100_000,
                 "max_abs_plugin_minus_exact": float(np.nanmax(np.abs(plugin - exact))),
                 "worst_plugin_deviation_in_half_intervals": float(worst_plugin.max()),
                 "exact_within_plugin_interval": ok_plugin,
+                "pass": ok_mi and ok_plugin,
                 "plugin_samples_per_angle": samples,
                 "interval_z": z,
             })

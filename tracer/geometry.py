@@ -438,12 +438,18 @@ class Geometry:
         def of(kind):
             return [s for s in shapes if type(s) is kind]
 
-        order, self.blocks = [], []
+        self.blocks = []
+        mids, rads = [], []  # per block: material ids and radiances of its primitives
+
+        def mat_id(shape) -> int:
+            return len(names) if shape.material is None else names.index(shape.material)
 
         def add(block, members):
             block.base = sum(b.count for b in self.blocks)
             self.blocks.append(block)
-            order.extend(members)
+            mids.append(np.asarray([mat_id(m) for m in members], dtype=np.uint32))
+            rads.append(np.asarray([m.emitter.radiance if m.emitter is not None else (0, 0, 0)
+                                    for m in members], dtype=np.float32).reshape(-1, 3))
 
         for kind, make in ((Sphere, _SphereBlock),
                            (Rectangle, lambda s: _PlanarBlock(s, False)),
@@ -454,33 +460,25 @@ class Geometry:
             members = of(kind)
             if members:
                 add(make(members), members)
-        mesh_material = []
-        for mesh in of(Mesh):
-            add(_MeshBlock(mesh), [mesh] * len(mesh.faces))
-        for inst in of(Instance):
+        for mesh in of(Mesh):  # one material for all its triangles; meshes do not emit
+            block = _MeshBlock(mesh)
+            block.base = sum(b.count for b in self.blocks)
+            self.blocks.append(block)
+            mids.append(np.full(block.count, mat_id(mesh), dtype=np.uint32))
+            rads.append(np.zeros((block.count, 3), dtype=np.float32))
+        for inst in of(Instance):  # the group's own materials; groups do not emit
             child = Geometry(scene, scene.groups[inst.group], names)
             block = _InstanceBlock(inst, child)
-            add(block, [None] * child.count)
-            mesh_material.append((block, child))
-        #: one entry per primitive id (shape, or None inside an instance)
-        self.owner = order
-        self.count = len(order)
-        mid = []
-        for s in order:
-            mid.append(len(names) if s is None or s.material is None else
-                       names.index(s.material))
-        mid = np.asarray(mid or [0], dtype=np.uint32)
-        rad = np.zeros((max(self.count, 1), 3), dtype=np.float32)
-        for i, s in enumerate(order):
-            if s is not None and s.emitter is not None:
-                rad[i] = s.emitter.radiance
-        # Instances: their primitives take the group's own materials.
-        for block, child in mesh_material:
-            mid[block.base:block.base + child.count] = child.material_id.numpy()
-        self.material_id = _u(mid)
-        self.radiance = _v3(rad)
-        #: the top-level shapes that emit light, with their primitive ids
-        self.shapes = [s for s in order if s is not None]
+            block.base = sum(b.count for b in self.blocks)
+            self.blocks.append(block)
+            mids.append(child.material_id.numpy()[:child.count])
+            rads.append(np.zeros((block.count, 3), dtype=np.float32))
+        self.count = sum(b.count for b in self.blocks)
+        mid = np.concatenate(mids) if mids else np.zeros(1, dtype=np.uint32)
+        rad = np.concatenate(rads) if rads else np.zeros((1, 3), dtype=np.float32)
+        self.material_id = _u(mid if len(mid) else np.zeros(1, dtype=np.uint32))
+        self.radiance = _v3(rad if len(rad) else np.zeros((1, 3), dtype=np.float32))
+        #: the shapes that emit light (area lights), top level only
         self.emitters = [s for s in shapes if getattr(s, "emitter", None) is not None]
 
     def closest_hit(self, o, d, tmax, active=True) -> Hit:
@@ -514,7 +512,7 @@ class Geometry:
             t, prim = block.intersect(o, d, t, prim, active)
         return t, prim
 
-    def surface(self, hit: Hit, o, d, need_uv: bool = True) -> Surface:
+    def surface(self, hit: Hit, o, d) -> Surface:
         """The hit record: position, geometric and shading normals, uv of each valid hit."""
         valid = hit.valid
         p = dr.fma(d, hit.t, o)

@@ -175,21 +175,27 @@ class Sphere:
 
 
 @dataclass(frozen=True)
-class Rectangle:
-    """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
+class _Planar:
+    """A flat shape in local xy (normal +z) placed by ``to_world``."""
     to_world: Matrix
     material: str | None
     emitter: AreaEmitter | None = None
 
     def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centre and the two half-edge vectors (images of local +x and +y) in world space."""
+        """Centre and the images of local +x and +y (half-edges, or radii) in world space."""
         m = np.asarray(self.to_world)
         c = tf.apply_point(m, (0, 0, 0))
         return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
 
     def normal(self) -> np.ndarray:
+        """Mitsuba's orientation: the inverse transpose of to_world applied to +z."""
         n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
         return n / np.linalg.norm(n)
+
+
+@dataclass(frozen=True)
+class Rectangle(_Planar):
+    """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
 
 
 @dataclass(frozen=True)
@@ -200,21 +206,8 @@ class Triangle:
 
 
 @dataclass(frozen=True)
-class Disk:
+class Disk(_Planar):
     """Mitsuba's disk: the unit disk in local xy, normal +z, placed by ``to_world``."""
-    to_world: Matrix
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centre and the images of local +x and +y (the disk's two radii) in world space."""
-        m = np.asarray(self.to_world)
-        c = tf.apply_point(m, (0, 0, 0))
-        return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
-
-    def normal(self) -> np.ndarray:
-        n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
-        return n / np.linalg.norm(n)
 
 
 @dataclass(frozen=True)
@@ -306,7 +299,6 @@ class Scene:
     tracer_only: tuple[str, ...] = ()
     #: named groups of shapes for ``instance`` shapes (object space)
     groups: dict[str, tuple] = field(default_factory=dict)
-    extra: dict[str, Any] = field(default_factory=dict)
 
     @property
     def name(self) -> str:
