@@ -57,6 +57,16 @@ def builtin_scenes() -> list[Path]:
     return sorted(SCENES_DIR.glob("*.toml"))
 
 
+def output_folder(path) -> Path:
+    """An output folder that may exist already, but not as a file."""
+    from tracer.errors import UserError
+
+    out = Path(path)
+    if out.exists() and not out.is_dir():
+        raise UserError(f"{out}: exists and is not a folder")
+    return out
+
+
 def load(args):
     from tracer import load_scene
 
@@ -185,11 +195,7 @@ def format_comparison(c) -> str:
 def cmd_compare(args) -> int:
     scene = load(args)
     _note_spp(scene)
-    outdir = Path(args.output) if args.output else Path("out") / "compare" / scene.name
-    if outdir.exists() and not outdir.is_dir():
-        from tracer.errors import UserError
-
-        raise UserError(f"{outdir}: exists and is not a folder")
+    outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
     _backend(args)
     from reference.compare import compare_scene
 
@@ -201,13 +207,9 @@ def cmd_compare(args) -> int:
 
 
 def cmd_export(args) -> int:
-    from tracer.errors import UserError
+    from tracer.imageio import check_output_path
 
-    out = Path(args.output)
-    if out.suffix.lower() != ".xml":
-        raise UserError(f"{out}: expected a .xml file name")
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise UserError(f"{out}: folder {out.parent} does not exist")
+    out = check_output_path(args.output, (".xml",), "file type")
     scene = load(args)
     from reference.mitsuba_scene import write_xml
 
@@ -226,9 +228,7 @@ def cmd_fresnel(args) -> int:
         raise UserError(f"--samples: expected at least 100, got {args.samples}")
     if not 0 < args.step <= 45:
         raise UserError(f"--step: expected a number of degrees in (0, 45], got {args.step:g}")
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"{out}: exists and is not a folder")
+    out = output_folder(args.output)
     _backend(args)
     from reference.fresnel_curves import fresnel_table, write_outputs
 
@@ -267,9 +267,7 @@ def cmd_report(args) -> int:
     paths = select_scenes(scenes_dir, args.scenes)
     if not paths:
         raise UserError(f"no scene in {scenes_dir} matches {args.scenes!r}")
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"{out}: exists and is not a folder")
+    out = output_folder(args.output)
     from tracer import load_scene
 
     for p in paths:  # refuse a bad scene before any rendering
@@ -293,9 +291,7 @@ def cmd_depth_sweep(args) -> int:
     depths = parse_depths(args.depths)
     if args.repeat < 1:
         raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
-    out = Path(args.output)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"{out}: exists and is not a folder")
+    out = output_folder(args.output)
     scene = load(args)
     _note_spp(scene)
     _backend(args)
@@ -310,13 +306,9 @@ def cmd_depth_sweep(args) -> int:
 
 
 def cmd_paths(args) -> int:
-    from tracer.errors import UserError
+    from tracer.imageio import check_output_path
 
-    out = Path(args.output)
-    if out.suffix.lower() != ".png":
-        raise UserError(f"{out}: expected a .png file name")
-    if not (out.parent if str(out.parent) else Path(".")).is_dir():
-        raise UserError(f"{out}: folder {out.parent} does not exist")
+    out = check_output_path(args.output, (".png",))
     scene = load(args)
     from reference.paths import (
         WANTED,

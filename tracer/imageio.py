@@ -18,11 +18,12 @@ from tracer.errors import UserError
 FORMATS = (".exr", ".png", ".ppm")
 
 
-def check_output_path(path: str | Path, formats: tuple[str, ...] = FORMATS) -> Path:
+def check_output_path(path: str | Path, formats: tuple[str, ...] = FORMATS,
+                      what: str = "image format") -> Path:
     """Refuse an output path before any work: unknown extension or a missing folder."""
     p = Path(path)
     if p.suffix.lower() not in formats:
-        raise UserError(f"{path}: unknown image format {p.suffix or '(none)'!r} "
+        raise UserError(f"{path}: unknown {what} {p.suffix or '(none)'!r} "
                         f"(expected one of: {', '.join(formats)})")
     parent = p.parent if str(p.parent) else Path(".")
     if not parent.is_dir():
