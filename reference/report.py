@@ -328,7 +328,9 @@ def html_page(report: Report, outdir: Path) -> str:
         "<p>Each scene is rendered by whitted's Dr.Jit tracer and by Mitsuba 3 (through the "
         "harness's Whitted integrator, which samples every light once per sample) at the same "
         "strata. <b>exact-strata</b>: deterministic scenes must agree to float32 precision except "
-        "at single edge samples. <b>z-test</b>: scenes where Mitsuba samples lobes or lights are "
+        "at single edge samples. <b>tessellated</b>: the same with limits that allow for a "
+        "paraboloid, which Mitsuba sees as a fine mesh. "
+        "<b>z-test</b>: scenes where Mitsuba samples lobes or lights are "
         "judged per pixel against the reference's variance (Sidak-corrected, &ge; 99.75 % of "
         "pixels) and on 4&times;4 blocks.</p>",
         "<table><tr><th>whitted</th><th>mitsuba</th><th>drjit</th><th>backend</th>"
