@@ -55,7 +55,7 @@ def parse_pixel(text: str, width: int, height: int) -> tuple[int, int]:
 
 def _light_points(scene):
     """(position or None for directional, direction, label) of every light to draw rays to."""
-    from tracer.scene import DirectionalLight, Rectangle, Sphere
+    from tracer.scene import DirectionalLight, Sphere, _Planar
 
     out = []
     for light in scene.lights:
@@ -68,7 +68,7 @@ def _light_points(scene):
             continue
         if isinstance(shape, Sphere):
             out.append((np.asarray(shape.center, dtype=np.float64), None, shape))
-        elif isinstance(shape, Rectangle):
+        elif isinstance(shape, _Planar):  # rectangles and disks: aim at the centre
             out.append((shape.corners()[0], None, shape))
         else:
             out.append((np.mean(np.asarray(shape.vertices), axis=0), None, shape))

@@ -85,3 +85,20 @@ def test_paths_command_draws_a_figure(tmp_path):
     assert (tmp_path / "p.png").stat().st_size > 10_000
     r = run_cli("paths", "area_lights", "--pixel", "500,2", "-o", tmp_path / "q.png")
     assert r.returncode == 2 and "outside" in r.stderr
+
+
+def test_ray_trees_reach_a_disk_light():
+    import tomllib
+
+    from tracer.scene import parse_scene
+
+    text = ("[film]\nwidth = 40\nheight = 30\nspp = 1\nmax_depth = 2\n"
+            "[camera]\norigin = [0, 1, 4]\ntarget = [0, 0.3, 0]\n"
+            "[materials.m]\ntype = 'diffuse'\n"
+            "[[shapes]]\ntype = 'disk'\nemitter = { radiance = 5 }\n"
+            "to_world = [ { scale = 0.5 }, { rotate = { axis = [1, 0, 0], angle = 90 } },"
+            " { translate = [0, 2, 0] } ]\n"
+            "[[shapes]]\ntype = 'rectangle'\nmaterial = 'm'\n"
+            "to_world = [ { scale = 3 }, { rotate = { axis = [1, 0, 0], angle = -90 } } ]\n")
+    (tree,) = ray_trees(parse_scene(tomllib.loads(text)), [(20, 20)])
+    assert "LDE" in tree.paths  # the floor, lit by the disk above it
