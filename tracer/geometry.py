@@ -76,6 +76,15 @@ def _c3(v) -> object:
     return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
 
 
+def _affine(m: np.ndarray, p, point: bool = True):
+    """The 4x4 (or 3x3) matrix m, as kernel constants, applied to a point or a vector."""
+    rows = [jit.Array3f(float(m[r, 0]), float(m[r, 1]), float(m[r, 2])) for r in range(3)]
+    x, y, z = (dr.dot(row, p) for row in rows)
+    if point:
+        x, y, z = x + float(m[0, 3]), y + float(m[1, 3]), z + float(m[2, 3])
+    return jit.Array3f(x, y, z)
+
+
 @dataclass
 class Hit:
     """The hit record's core: ray parameter and global primitive id (INVALID for a miss)."""
@@ -114,6 +123,17 @@ class _Block:
     def _update(self, ti, hit, i, t, prim):
         return dr.select(hit, ti, t), dr.select(hit, i + self.base, prim)
 
+    def test(self, o, d, t, i):
+        """(t, hit) of primitive i (a Python int, or a UInt32 array for looped tables)."""
+        raise NotImplementedError
+
+    def _unrolled(self, o, d, t, prim):
+        """Every primitive written into the kernel one after another, nearest hit kept."""
+        for i in range(self.count):
+            ti, hit = self.test(o, d, t, i)
+            t, prim = self._update(ti, hit, i, t, prim)
+        return t, prim
+
 
 class _TableBlock(_Block):
     """Primitives stored as arrays; unrolled with constants when few, else a symbolic loop."""
@@ -134,15 +154,9 @@ class _TableBlock(_Block):
         src = getattr(self, name)
         return dr.gather(type(src), src, i, active)
 
-    def test(self, o, d, t, i):
-        raise NotImplementedError
-
     def intersect(self, o, d, t, prim, active):
         if self.count <= UNROLL:
-            for i in range(self.count):
-                ti, hit = self.test(o, d, t, i)
-                t, prim = self._update(ti, hit, i, t, prim)
-            return t, prim
+            return self._unrolled(o, d, t, prim)
         return self._looped(o, d, t, prim, active)
 
     @dr.syntax
@@ -259,12 +273,13 @@ class _PolygonBlock(_Block):
             self.items.append((origin, u, v, n, [float(x) for x in xy[:, 0]],
                                [float(y) for y in xy[:, 1]]))
 
+    def test(self, o, d, t, i):
+        origin, u, v, n, xs, ys = self.items[i]
+        ti, hit, _, _ = poly_f.intersect(o, d, _c3(origin), _c3(n), _c3(u), _c3(v), xs, ys, t)
+        return ti, hit
+
     def intersect(self, o, d, t, prim, active):
-        for i, (origin, u, v, n, xs, ys) in enumerate(self.items):
-            ti, hit, _, _ = poly_f.intersect(o, d, _c3(origin), _c3(n), _c3(u), _c3(v), xs, ys,
-                                             t)
-            t, prim = self._update(ti, hit, i, t, prim)
-        return t, prim
+        return self._unrolled(o, d, t, prim)
 
     def surface(self, k, o, d, t, mask):
         p = dr.fma(d, t, o)
@@ -293,30 +308,16 @@ class _QuadricBlock(_Block):
             extra = None if kind == "cyl" else (1 / s.a ** 2, 1 / s.b ** 2, s.height, s.a, s.b)
             self.items.append((m, inv, normal_m, extra))
 
-    @staticmethod
-    def _apply(m, p, point=True):
-        rows = [jit.Array3f(float(m[r, 0]), float(m[r, 1]), float(m[r, 2])) for r in range(3)]
-        x, y, z = (dr.dot(row, p) for row in rows)
-        if point:
-            x, y, z = x + float(m[0, 3]), y + float(m[1, 3]), z + float(m[2, 3])
-        return jit.Array3f(x, y, z)
-
-    def _local_ray(self, item, o, d):
-        _, inv, _, _ = item
-        return self._apply(inv, o), self._apply(inv, d, point=False)
-
-    def _test(self, item, o, d, t):
-        ol, dl = self._local_ray(item, o, d)
+    def test(self, o, d, t, i):
+        _, inv, _, extra = self.items[i]
+        ol, dl = _affine(inv, o), _affine(inv, d, point=False)
         if self.kind == "cyl":
             return cyl_f.intersect(ol, dl, t)
-        ia2, ib2, h, _, _ = item[3]
+        ia2, ib2, h, _, _ = extra
         return par_f.intersect(ol, dl, ia2, ib2, h, t)
 
     def intersect(self, o, d, t, prim, active):
-        for i, item in enumerate(self.items):
-            ti, hit = self._test(item, o, d, t)
-            t, prim = self._update(ti, hit, i, t, prim)
-        return t, prim
+        return self._unrolled(o, d, t, prim)
 
     def surface(self, k, o, d, t, mask):
         p = dr.fma(d, t, o)
@@ -326,7 +327,7 @@ class _QuadricBlock(_Block):
         for i, item in enumerate(self.items):
             sel = mask & (k == i)
             m, inv, normal_m, extra = item
-            local = self._apply(inv, p)
+            local = _affine(inv, p)
             if self.kind == "cyl":
                 # Re-project onto the unit cylinder, as Mitsuba does, to limit round-off.
                 inv_r = dr.rsqrt(local.x * local.x + local.y * local.y)
@@ -337,9 +338,9 @@ class _QuadricBlock(_Block):
                 ia2, ib2, h, a, b = extra
                 grad = par_f.gradient(local, ia2, ib2)
                 u, v = par_f.uv(local, a, b, h)
-            nw = dr.normalize(self._apply(normal_m, grad, point=False))
+            nw = dr.normalize(_affine(normal_m, grad, point=False))
             n = dr.select(sel, nw, n)
-            pw = dr.select(sel, self._apply(m, local), pw)
+            pw = dr.select(sel, _affine(m, local), pw)
             uv = dr.select(sel, jit.Array2f(u, v), uv)
         return pw, n, n, uv
 
@@ -404,8 +405,8 @@ class _InstanceBlock(_Block):
         self.normal_m = np.linalg.inv(m[:3, :3]).T
 
     def _to_object(self, o, d):
-        ol = _QuadricBlock._apply(self.inv, o)
-        dl = _QuadricBlock._apply(self.inv, d, point=False)
+        ol = _affine(self.inv, o)
+        dl = _affine(self.inv, d, point=False)
         # Unit direction in object space; t scales by its length.
         scale = dr.norm(dl)
         return ol, dl / scale, scale
@@ -419,9 +420,9 @@ class _InstanceBlock(_Block):
     def surface(self, k, o, d, t, mask):
         ol, dl, scale = self._to_object(o, d)
         s = self.child.surface(Hit(t * scale, dr.select(mask, k, INVALID)), ol, dl)
-        p = _QuadricBlock._apply(self.m, s.p)
-        n = dr.normalize(_QuadricBlock._apply(self.normal_m, s.n, point=False))
-        ns = dr.normalize(_QuadricBlock._apply(self.normal_m, s.ns, point=False))
+        p = _affine(self.m, s.p)
+        n = dr.normalize(_affine(self.normal_m, s.n, point=False))
+        ns = dr.normalize(_affine(self.normal_m, s.ns, point=False))
         return p, n, ns, s.uv
 
 

@@ -148,11 +148,14 @@ class _Materials:
     """Material table: kind, colours, Phong parameters, eta, Schlick flag, checkerboards."""
 
     def __init__(self, scene: Scene):
+        def blank(kind: int) -> dict:
+            return {"kind": kind, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0, "blinn": False,
+                    "amb": (0, 0, 0), "eta": 1.0, "schlick": False, "checker": False,
+                    "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)}
+
         rows = []
         for m in scene.materials.values():
-            row = {"kind": DIFFUSE, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0,
-                   "blinn": False, "amb": (0, 0, 0), "eta": 1.0, "schlick": False,
-                   "checker": False, "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)}
+            row = blank(DIFFUSE)
             if isinstance(m, Dielectric):
                 row.update(kind=DIELECTRIC, refl=(1, 1, 1), eta=m.eta,
                            schlick=m.fresnel == "schlick")
@@ -168,10 +171,7 @@ class _Materials:
                     row.update(kind=PHONG, ks=m.specular, p=m.exponent,
                                blinn=m.model == "blinn-phong", amb=m.ambient)
             rows.append(row)
-        # Pure emitters: material index len(materials), black.
-        rows.append({"kind": BLACK, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0,
-                     "blinn": False, "amb": (0, 0, 0), "eta": 1.0, "schlick": False,
-                     "checker": False, "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)})
+        rows.append(blank(BLACK))  # pure emitters: material index len(materials), black
 
         def col(key):
             a = np.asarray([r[key] for r in rows], dtype=np.float32)
