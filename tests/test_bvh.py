@@ -28,12 +28,12 @@ def v3(jit, a):
 
 
 @dr.syntax
-def _brute_loop(jit, o, d, p0, e1, e2, t, tri, count):
+def _brute_loop(jit, o, d, p0, p1, p2, t, tri, count):
     i = jit.UInt32(0)
     while i < count:
         ti, hit, _, _ = tri_f.intersect(o, d, dr.gather(jit.Array3f, p0, i),
-                                        dr.gather(jit.Array3f, e1, i),
-                                        dr.gather(jit.Array3f, e2, i), t)
+                                        dr.gather(jit.Array3f, p1, i),
+                                        dr.gather(jit.Array3f, p2, i), t)
         t = dr.select(hit, ti, t)
         tri = dr.select(hit, i, tri)
         i += 1
@@ -45,9 +45,9 @@ def brute_force(jit, p0, p1, p2, o, d, tmax):
     n = len(o)
     t = jit.Float(np.broadcast_to(np.float32(tmax), (n,)).copy())
     tri = dr.full(jit.UInt32, INVALID, n)
-    # The edges as BVH stores them: float64 differences rounded once.
-    t, tri = _brute_loop(jit, v3(jit, o), v3(jit, d), v3(jit, p0), v3(jit, p1 - p0),
-                         v3(jit, p2 - p0), t, tri, dr.opaque(jit.UInt32, len(p0)))
+    # The corners as BVH stores them: float64 rounded once.
+    t, tri = _brute_loop(jit, v3(jit, o), v3(jit, d), v3(jit, p0), v3(jit, p1),
+                         v3(jit, p2), t, tri, dr.opaque(jit.UInt32, len(p0)))
     return t.numpy(), tri.numpy()
 
 
@@ -214,8 +214,7 @@ def test_barycentrics_are_those_of_the_triangle_test(jit):
     hit = np.flatnonzero(tri != INVALID)
     k = tri[hit]
     t2, ok, b2, g2 = tri_f.intersect(v3(jit, o[hit]), v3(jit, d[hit]), v3(jit, p0[k]),
-                                     v3(jit, p1[k] - p0[k]), v3(jit, p2[k] - p0[k]),
-                                     jit.Float(math.inf))
+                                     v3(jit, p1[k]), v3(jit, p2[k]), jit.Float(math.inf))
     assert ok.numpy().all()
     np.testing.assert_allclose(beta[hit], b2.numpy(), rtol=T_REL, atol=1e-6)
     np.testing.assert_allclose(gamma[hit], g2.numpy(), rtol=T_REL, atol=1e-6)

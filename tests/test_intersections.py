@@ -91,15 +91,14 @@ def test_ray_rectangle_local_coordinates_with_shear(jit):
     assert not bool(hit[0])
 
 
-def test_ray_triangle_cramers_rule_barycentrics(jit):
+def test_ray_triangle_barycentrics_solve_the_ray_plane_system(jit):
     p0, p1, p2 = np.array([0.0, 0, 0]), np.array([2.0, 0, 0]), np.array([0.0, 3, 0])
     bary = np.array([0.2, 0.5, 0.3])                       # (1 - beta - gamma, beta, gamma)
     target = bary[0] * p0 + bary[1] * p1 + bary[2] * p2
     o = target + np.array([0.3, -0.2, 4.0])
     d = (target - o) / np.linalg.norm(target - o)
     t, hit, beta, gamma = triangle.intersect(v3(jit, o), v3(jit, d), v3(jit, p0),
-                                             v3(jit, p1 - p0), v3(jit, p2 - p0),
-                                             jit.Float(math.inf))
+                                             v3(jit, p1), v3(jit, p2), jit.Float(math.inf))
     # The same 3x3 system solved by numpy: [e1 e2 -d] (beta, gamma, t) = o - p0.
     m = np.column_stack([p1 - p0, p2 - p0, -d])
     ref = np.linalg.solve(m, o - p0)
@@ -111,11 +110,11 @@ def test_ray_triangle_cramers_rule_barycentrics(jit):
 
 
 def test_ray_triangle_outside_barycentric_range_misses(jit):
-    p0, e1, e2 = v3(jit, (0, 0, 0)), v3(jit, (1, 0, 0)), v3(jit, (0, 1, 0))
+    p0, p1, p2 = v3(jit, (0, 0, 0)), v3(jit, (1, 0, 0)), v3(jit, (0, 1, 0))
     # beta + gamma = 1.2 > 1, beta < 0 and a ray parallel to the plane: all miss.
     o = v3(jit, (0.6, 0.6, 1), (-0.1, 0.5, 1), (0.2, 0.2, 1))
     d = v3(jit, (0, 0, -1), (0, 0, -1), (1, 0, 0))
-    _, hit, _, _ = triangle.intersect(o, d, p0, e1, e2, jit.Float(math.inf))
+    _, hit, _, _ = triangle.intersect(o, d, p0, p1, p2, jit.Float(math.inf))
     assert not np.any(np.asarray(hit))
 
 

@@ -132,7 +132,8 @@ def build_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *, bins: int = 16,
     traversal_cost, intersection_cost : C_trav and C_isect of the SAH. Measured
         with :class:`BVH`'s traversal on a CPU: a node step (14 gathered floats,
         two slab tests) costs about two triangle tests (9 gathered floats, one
-        Cramer solve); C_trav of 1 to 3 give times within 15 % of each other.
+        solve; measured with Cramer's rule, which the watertight test matches
+        in speed); C_trav of 1 to 3 give times within 15 % of each other.
     """
     t_start = time.perf_counter()
     p0, p1, p2 = (np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in (p0, p1, p2))
@@ -364,8 +365,11 @@ def pack_nodes(b: BVHArrays) -> tuple[np.ndarray, int, int]:
     slots: 64 bytes, one cache line once aligned (:func:`_aligned`). Inner
     nodes keep their depth-first order, so a parent and its left child are
     neighbours in memory. Boxes are rounded outwards to float32 and widened by
-    2^-20 of their largest coordinate, more than float32 rounding moves a hit
-    of :func:`tracer.shapes.triangle.intersect` outside its triangle.
+    2^-20 of their largest coordinate, more than the float32 rounding of the
+    corners. :func:`tracer.shapes.triangle.intersect` works in the ray's
+    sheared space and may take a ray a few roundings of the ray's length
+    beside its triangle; the widening of t_far in the slab test covers that
+    (tests/test_watertight.py aims rays from far away at edges on box faces).
 
     The stack size is the depth of the tree plus one: a ray at a node of
     depth k has at most k deferred nodes (one per ancestor), so its stack
@@ -417,7 +421,7 @@ class BVH:
     perm : jit.UInt32 original index of each triangle in leaf order.
     nodes : jit.Float inner-node records (:func:`pack_nodes`).
     tris : jit.Float triangle records in leaf order, 16 floats each:
-        p0 (3), e1 = p1 - p0 (3), e2 = p2 - p0 (3), unused (7).
+        p0 (3), p1 (3), p2 (3), unused (7).
     """
 
     def __init__(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, **build_options):
@@ -432,13 +436,14 @@ class BVH:
         o = self.arrays.order
         self.perm = jit.UInt32(o.astype(np.uint32))
         tr = np.zeros((len(o), 16), np.float32)
-        # The edges are differences of the float64 corners, rounded once, as
-        # tracer.geometry stores them, so that both give the same float32 numbers.
-        tr[:, 0:3], tr[:, 3:6], tr[:, 6:9] = p0[o], p1[o] - p0[o], p2[o] - p0[o]
+        # The corners rounded once to float32, as tracer.geometry stores them: a vertex
+        # shared by two triangles is the same float32 point in both (the watertight
+        # test relies on it), and both modules give the same numbers.
+        tr[:, 0:3], tr[:, 3:6], tr[:, 6:9] = p0[o], p1[o], p2[o]
         self.tris = _aligned(tr)
 
     def triangles(self) -> tuple:
-        """(p0, e1, e2) as jit.Array3f in leaf order (index i is original ``perm[i]``)."""
+        """(p0, p1, p2) as jit.Array3f in leaf order (index i is original ``perm[i]``)."""
         i = dr.arange(jit.UInt32, self.triangle_count) * 16
         return tuple(jit.Array3f(*(dr.gather(jit.Float, self.tris, i + 3 * k + c)
                                    for c in range(3))) for k in range(3))
@@ -497,6 +502,7 @@ class BVH:
         tiny = 1e-30
         inv = 1.0 / jit.Array3f(*(dr.select(dr.abs(d[k]) < tiny, dr.copysign(tiny, d[k]), d[k])
                                   for k in range(3)))
+        rs = tri_f.ray_space(o, d)  # the triangle test's per-ray part, once per ray
         tri = dr.full(jit.UInt32, INVALID, n)
         beta = dr.zeros(jit.Float, n)
         gamma = dr.zeros(jit.Float, n)
@@ -547,7 +553,7 @@ class BVH:
                 q = dr.gather(jit.ArrayXf, tris, i, alive & (i < end), shape=(16, n))
                 tk, hk, bk, gk = tri_f.intersect(
                     o, d, jit.Array3f(q[0], q[1], q[2]), jit.Array3f(q[3], q[4], q[5]),
-                    jit.Array3f(q[6], q[7], q[8]), t)
+                    jit.Array3f(q[6], q[7], q[8]), t, rs)
                 hk &= alive & (i < end)
                 t = dr.select(hk, tk, t)
                 tri = dr.select(hk, i, tri)

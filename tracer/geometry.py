@@ -234,28 +234,27 @@ class _PlanarBlock(_TableBlock):
 
 
 class _TriangleBlock(_TableBlock):
-    fields = ("p0", "e1", "e2")
+    # The corners themselves (not p0 and two edges): a vertex that two triangles share
+    # is then the same float32 point in both, which the watertight test needs.
+    fields = ("p0", "p1", "p2")
 
     def __init__(self, tris: list[Triangle]):
         self.count = len(tris)
         v = np.asarray([t.vertices for t in tris], dtype=np.float64)
-        self.p0 = _v3(v[:, 0])
-        self.e1 = _v3(v[:, 1] - v[:, 0])
-        self.e2 = _v3(v[:, 2] - v[:, 0])
+        self.p0, self.p1, self.p2 = (_v3(v[:, k]) for k in range(3))
         n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
         self.n = _v3(n / np.linalg.norm(n, axis=1, keepdims=True))
         self._constants()
 
     def test(self, o, d, t, i):
-        ti, hit, _, _ = tri_f.intersect(o, d, self.get("p0", i), self.get("e1", i),
-                                        self.get("e2", i), t)
+        ti, hit, _, _ = tri_f.intersect(o, d, self.get("p0", i), self.get("p1", i),
+                                        self.get("p2", i), t)
         return ti, hit
 
     def surface(self, k, o, d, t, mask):
         n = dr.gather(jit.Array3f, self.n, k, mask)
-        _, _, beta, gamma = tri_f.intersect(o, d, dr.gather(jit.Array3f, self.p0, k, mask),
-                                            dr.gather(jit.Array3f, self.e1, k, mask),
-                                            dr.gather(jit.Array3f, self.e2, k, mask), dr.inf)
+        p0, p1, p2 = (dr.gather(jit.Array3f, getattr(self, f), k, mask) for f in self.fields)
+        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1, p2, dr.inf)
         # Mitsuba's mesh without texture coordinates: uv = (beta, gamma).
         return dr.fma(d, t, o), n, n, jit.Array2f(beta, gamma)
 
@@ -377,7 +376,7 @@ class _MeshBlock(_Block):
         p0 = dr.gather(jit.Array3f, self.p, i0, mask)
         p1 = dr.gather(jit.Array3f, self.p, i1, mask)
         p2 = dr.gather(jit.Array3f, self.p, i2, mask)
-        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1 - p0, p2 - p0, dr.inf)
+        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1, p2, dr.inf)
         n = dr.gather(jit.Array3f, self.face_n, k, mask)
         ns = n
         if self.vn is not None:  # barycentric interpolation of the vertex normals
