@@ -326,23 +326,18 @@ def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndar
 def comparable(scene):
     """The scene with its declared tracer-only parts replaced by what Mitsuba models.
 
-    Schlick's approximation becomes the exact Fresnel equations; a Phong
-    material's ambient term becomes zero. Parts that are not declared stay as
-    they are, so an undeclared tracer-only part fails the comparison rather
-    than being hidden.
+    Each material says what that means for its kind
+    (:meth:`~tracer.materials.base.MaterialModel.comparable`): Schlick's
+    approximation becomes the exact Fresnel equations, a Phong material's
+    ambient term becomes zero. Parts that are not declared stay as they are,
+    so an undeclared tracer-only part fails the comparison rather than being
+    hidden.
     """
     from dataclasses import replace
 
-    from tracer.scene import Dielectric, Phong
-
     if not scene.tracer_only:
         return scene
-    mats = dict(scene.materials)
-    for k, m in mats.items():
-        if "schlick" in scene.tracer_only and isinstance(m, Dielectric):
-            mats[k] = replace(m, fresnel="exact")
-        if "ambient" in scene.tracer_only and isinstance(m, Phong):
-            mats[k] = replace(m, ambient=(0.0, 0.0, 0.0))
+    mats = {k: m.comparable(scene.tracer_only) for k, m in scene.materials.items()}
     return replace(scene, materials=mats)
 
 
@@ -362,6 +357,7 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     from tracer import backend
     from tracer.imageio import write_exr
     from tracer.integrator import Integrator
+    from tracer.scene import TRACER_ONLY
 
     full_scene = scene
     scene = comparable(scene)
@@ -398,9 +394,9 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     if tracer_random:
         reason += (f"; the tracer samples area lights, so its image is the mean of "
                    f"{TRACER_SEEDS} seeds")
-    for part, used in (("schlick", full_scene.uses_schlick()),
-                       ("ambient", full_scene.uses_ambient())):
-        if used and part not in full_scene.tracer_only:
+    used = full_scene.tracer_only_used()
+    for part in TRACER_ONLY:
+        if part in used and part not in full_scene.tracer_only:
             reason += (f"; this scene uses {part}, which Mitsuba does not model: declare "
                        f"[compare] tracer_only = [\"{part}\"] to check the rest")
     result = Comparison(
