@@ -11,9 +11,8 @@ lane. The integrator never asks which kind a lane holds.
 Why masks and not Dr.Jit's ``dr.switch`` (an indirect call per lane): a scene
 has a handful of kinds, each a few dozen instructions, and on the LLVM backend
 the masked evaluation of every present kind inside the one kernel per level
-measured faster than the symbolic calls on the built-in scenes (figures in
-``docs/extending.md``). pbrt-v4 makes the same choice for a tagged pointer
-over few types: a switch inlined at the call site.
+was never slower than the symbolic calls on the built-in scenes, and up to
+1.17 times faster (``benchmarks/bench_dispatch.py``; ``docs/extending.md``).
 """
 
 from __future__ import annotations
@@ -25,7 +24,7 @@ import drjit as dr
 import numpy as np
 
 from tracer.backend import jit
-from tracer.materials import REGISTRY, module_of
+from tracer.materials import REGISTRY, type_of
 from tracer.materials.base import MaterialModel, ShadingPoint
 
 
@@ -109,17 +108,17 @@ class SceneMaterials:
     """Every material of a scene as per-kind tables, and the dispatch over kinds."""
 
     def __init__(self, materials: list[MaterialModel]):
-        by_kind: dict = {}
+        by_kind: dict[str, list] = {}
         rows = []
         for m in materials:
-            members = by_kind.setdefault(module_of(m), [])
-            rows.append((module_of(m), len(members)))
+            members = by_kind.setdefault(type_of(m), [])
+            rows.append((type_of(m), len(members)))
             members.append(m)
-        order = [module for module in REGISTRY.values() if module in by_kind]
+        order = [name for name in REGISTRY if name in by_kind]
         #: one BSDF per kind present, in registry order
-        self.kinds = [module.BSDF(by_kind[module]) for module in order]
+        self.kinds = [REGISTRY[name].BSDF(by_kind[name]) for name in order]
         # Material id len(materials) is "no material" (a pure emitter): no kind matches it.
-        kind = [order.index(module) for module, _ in rows] + [len(order)]
+        kind = [order.index(name) for name, _ in rows] + [len(order)]
         self.kind = jit.UInt32(np.asarray(kind, dtype=np.uint32))
         self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
         self.has_smooth = any(k.smooth for k in self.kinds)
