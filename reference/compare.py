@@ -189,7 +189,7 @@ class Verdict:
 def choose_test(scene) -> str:
     """``exact-strata`` or ``tessellated`` for deterministic scenes, ``z-test`` when either
     side samples."""
-    if scene.has_specular() or scene.has_area_lights():
+    if scene.has_specular() or scene.samples_lights():
         return "z-test"
     return "tessellated" if scene.has_tessellated() else "exact-strata"
 
@@ -363,8 +363,9 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     scene = comparable(scene)
     test_name = choose_test(scene)
     needs_var = test_name == "z-test"
-    # The tracer samples only area lights; elsewhere it is deterministic.
-    tracer_random = needs_var and scene.has_area_lights()
+    # The tracer samples only lights (area emitters, or lights that are not delta);
+    # elsewhere it is deterministic.
+    tracer_random = needs_var and scene.samples_lights()
     integ = Integrator(scene)
     integ.render()  # warm-up: compiles the kernels, so that both sides are timed warm
     tr = integ.render(progress)

@@ -36,7 +36,6 @@ def test_every_kind_has_a_parser_a_tracer_behaviour_and_a_mitsuba_conversion():
         assert callable(module.parse) and callable(ref_materials.REGISTRY[name].mitsuba), name
         bsdf = module.BSDF
         assert bsdf.smooth or bsdf.lobes, f"{name}: neither a smooth part nor delta lobes"
-        assert module.MODEL.delta == bool(bsdf.lobes), name
     assert list(emitters.LIGHTS) == list(ref_emitters.REGISTRY)
     for name, module in emitters.LIGHTS.items():
         assert issubclass(module.MODEL, emitter_base.LightModel), name
@@ -68,8 +67,6 @@ class Veil(base.MaterialModel):
     """Lambertian with probability ``opacity``, else the ray passes straight through."""
     opacity: float = 0.0
     color: tuple = (0.5, 0.5, 0.5)
-
-    delta = True
 
 
 class VeilBSDF(base.BSDF):
@@ -231,3 +228,13 @@ def test_a_light_at_infinity_is_seen_by_escaping_rays_and_sampled_at_surfaces(ji
     assert abs(floor.mean() - rho * L) < 5 * sigma, (floor.mean(), rho * L, sigma)
     # Every path here is LE or LDE.
     assert np.allclose(_render(text, "LDE").image + lpe_le, image, rtol=1e-6, atol=0)
+
+    # The tracer samples it, so its image has variance: compared by the z-test with
+    # its seeds pooled, unlike a scene lit by delta lights only.
+    import tomllib
+
+    from reference.compare import choose_test
+
+    assert parse_scene(tomllib.loads(text)).samples_lights()
+    assert choose_test(parse_scene(tomllib.loads(text))) == "z-test"
+    assert not parse_scene(tomllib.loads(_veiled(1.0))).samples_lights()

@@ -265,10 +265,16 @@ class Scene:
 
     def has_specular(self) -> bool:
         """Some material in use has delta lobes (mirror reflection, refraction)."""
-        return any(m.delta for m in self.used_materials())
+        return any(_materials.module_of(m).BSDF.lobes for m in self.used_materials())
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
+
+    def samples_lights(self) -> bool:
+        """The tracer samples some light at random (area emitters, or a light kind that is
+        not delta): its image is then an estimate with variance."""
+        return self.has_area_lights() or any(
+            not _emitters.LIGHTS[_emitters.type_of(light)].Emitter.delta for light in self.lights)
 
     def tracer_only_used(self) -> frozenset[str]:
         """The tracer-only parts (see ``TRACER_ONLY``) that materials in use have."""

@@ -48,9 +48,6 @@ class MaterialModel:
     """A material of the scene model, the parsed ``[materials.NAME]`` table (a dataclass a kind)."""
     name: str
 
-    #: The kind has delta lobes (mirror reflection, refraction). Mitsuba samples one
-    #: of them per sample, so a scene using it is compared with the z-test.
-    delta: ClassVar[bool] = False
     #: Parts of this kind that only the tracer models, which a scene may declare in
     #: ``[compare] tracer_only`` (e.g. ``"schlick"``).
     tracer_only_parts: ClassVar[tuple[str, ...]] = ()

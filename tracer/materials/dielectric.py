@@ -34,7 +34,6 @@ class Dielectric(base.MaterialModel):
     ext_ior: float = 1.0
     fresnel: str = "exact"  # or "schlick" (tracer only; Mitsuba is always exact)
 
-    delta = True
     tracer_only_parts = ("schlick",)
 
     @property

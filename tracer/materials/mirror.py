@@ -28,8 +28,6 @@ Color = tuple[float, float, float]
 class Mirror(base.MaterialModel):
     reflectance: Color = (1.0, 1.0, 1.0)
 
-    delta = True
-
 
 MODEL = Mirror
 
