@@ -26,7 +26,7 @@ differences shrink as 1/sqrt(passes)). As Mitsuba's own render tests do,
 each pixel and channel is tested with z = |tracer - mitsuba| / sqrt(Var),
 where Var is the variance of the reference's pixel mean, estimated from its
 per-sample second moment (E[x^2] - E[x]^2) / N over its N pooled samples,
-plus, where the tracer samples area lights, the variance of its image, which
+plus, where the tracer samples lights (area lights), the variance of its image, which
 is then the mean of 16 seeds (see :func:`tracer_pooled`), plus a float32
 floor (sigma = 1e-4 |value|, the same precision argument as above, so that
 pixels without any randomness are compared to float precision). Two-sided
@@ -294,14 +294,14 @@ def ztest_passes(spp: int) -> int:
     return -(-ZTEST_SAMPLES // spp)
 
 
-#: Tracer renders (seeds) pooled where the tracer samples area lights.
+#: Tracer renders (seeds) pooled where the tracer samples lights (area lights).
 TRACER_SEEDS = 16
 
 
 def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndarray]:
     """Mean of ``seeds`` tracer renders and the variance of that mean.
 
-    Where the tracer samples area lights its image is random. The comparison
+    Where the tracer samples lights (area lights) its image is random. The comparison
     then tests its expectation, estimated by the mean of renders with seeds
     0..seeds-1 (the same strata, independent light samples: as one render
     with seeds x spp samples), and the variance of that mean comes from the
@@ -393,7 +393,7 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
                    "the expected deviation")
     if tracer_random:
-        reason += (f"; the tracer samples area lights, so its image is the mean of "
+        reason += (f"; the tracer samples lights, so its image is the mean of "
                    f"{TRACER_SEEDS} seeds")
     used = full_scene.tracer_only_used()
     for part in TRACER_ONLY:

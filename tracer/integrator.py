@@ -17,6 +17,13 @@ internal reflection. Rays that miss, end on a diffuse surface or carry zero
 weight spawn nothing, and the next level is compacted to the rays that
 remain, so the cost follows the rays actually traced rather than 2^depth.
 
+The integrator never asks which material or light it holds: at a hit it asks
+the material interface (:mod:`tracer.materials.dispatch`) for the smooth
+part f(wo, wi) to sum over the lights, the delta lobes to follow and any
+emission, and it asks each light (:mod:`tracer.emitters`) for a direction,
+a shadow-ray length and the incident quantity (diffuse and Phong materials
+have a smooth part, mirrors and glass delta lobes).
+
 ``max_depth`` counts path segments as Mitsuba does: 1 sees only emitters,
 2 adds direct light at the first hit, each further unit one more specular
 bounce. The recursion "illumination equation with recursion" of lecture 1 is
