@@ -196,11 +196,11 @@ class Integrator:
             off = spawn_offset(p)
             p_front = dr.fma(ng, off, p)
             si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
-            bsdf = self.materials.at(mid, si, valid)
-            lit = bsdf.smooth
+            mats = self.materials.at(mid, si, valid)
+            lit = mats.smooth
             if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
                 lit &= self._accepts(self._steps(b.state, "DL"))
-            for mask, value, letters in bsdf.emission():
+            for mask, value, letters in mats.emission():
                 gate = mask
                 if self.dfa is not None:
                     gate &= self._accepts(self._steps(b.state, letters))
@@ -214,7 +214,7 @@ class Integrator:
                     wi, dist, e = light.sample(p, p_front, u)
                     tmax = dist * (1 - SHADOW_EPSILON)
                     cos = lights.lambert_cosine(nl, wi)
-                    f = bsdf.eval(wi)
+                    f = mats.eval(wi)
                     active = lit & (cos > 0) & (dr.max(e) > 0)
                     # Leave the surface on the side the shadow ray goes to (as Mitsuba's
                     # spawn_ray_to does): with interpolated normals a lit direction can lie
@@ -224,7 +224,7 @@ class Integrator:
                     contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                     shadow_masks.append(active)
             if self.materials.has_delta:
-                children = self._delta(b, bsdf, si, off)
+                children = self._delta(b, mats, si, off)
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
         if children is None:
@@ -236,12 +236,12 @@ class Integrator:
         nxt = _concat([c.gather(dr.compress(keep)) for c, keep in children])
         return nxt, _count(shadow_masks)
 
-    def _delta(self, b: _Batch, bsdf, si: ShadingPoint, off) -> list:
+    def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
         """The next level's rays: one batch per delta-lobe slot, and which of them to keep."""
         far = dr.full(jit.Float, dr.inf, b.size())
         states: dict = {}
         out = []
-        for slot in bsdf.delta_lobes(b.weight):
+        for slot in mats.delta_lobes(b.weight):
             w = slot.weight
             state = None
             if self.dfa is not None:  # a specular vertex: ... + S; dead states carry nothing

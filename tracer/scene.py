@@ -7,6 +7,10 @@ reference. Any input the contract calls bad is refused by :func:`load_scene`
 with a :class:`~tracer.errors.SceneError` naming the file, the key and what was
 expected, before anything renders.
 
+Each material and light kind is parsed by its own module (``tracer/materials/``,
+``tracer/emitters/``), found through their registries by the ``type`` key;
+this module reads the rest (film, camera, shapes, groups, ``[compare]``).
+
 Two lines load and render a scene::
 
     >>> from tracer import load_scene, render            # doctest: +SKIP

@@ -113,7 +113,8 @@ class BSDF:
     :meth:`params` (gather a row per lane), :meth:`eval` (smooth kinds),
     :meth:`delta_lobes` (kinds with lobes), :meth:`emission` (kinds that emit).
     """
-    #: The kind has a smooth part: the integrator sums direct light through :meth:`eval`.
+    #: The kind has a smooth part: the integrator sums direct light through :meth:`eval`
+    #: (a D vertex in light-path expressions).
     smooth: ClassVar[bool] = False
     #: The delta lobes :meth:`delta_lobes` returns, in slot order.
     lobes: ClassVar[tuple[Lobe, ...]] = ()

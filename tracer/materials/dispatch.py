@@ -123,7 +123,6 @@ class SceneMaterials:
         self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
         self.has_smooth = any(k.smooth for k in self.kinds)
         self.has_delta = any(k.lobes for k in self.kinds)
-        self.has_emission = any(k.emits for k in self.kinds)
 
     def at(self, mid, si: ShadingPoint, valid) -> Closure:
         """The materials of material ids ``mid`` at the hits ``si`` (lanes in ``valid``)."""
