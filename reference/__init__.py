@@ -19,8 +19,17 @@ def mitsuba():
     if mi.variant() != variant:
         mi.set_variant(variant)
     from reference import (
+        emitters,
         integrators,  # noqa: F401  (registers the `whitted` integrator)
-        phong_bsdf,  # noqa: F401  (registers the `whitted_phong` BSDF)
+        materials,
     )
 
+    # Plugins written on Mitsuba's API by material and emitter kinds (e.g. `whitted_phong`).
+    if variant not in _registered:
+        materials.register_plugins(mi)
+        emitters.register_plugins(mi)
+        _registered.add(variant)
     return mi
+
+
+_registered: set[str] = set()

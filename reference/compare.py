@@ -26,7 +26,7 @@ differences shrink as 1/sqrt(passes)). As Mitsuba's own render tests do,
 each pixel and channel is tested with z = |tracer - mitsuba| / sqrt(Var),
 where Var is the variance of the reference's pixel mean, estimated from its
 per-sample second moment (E[x^2] - E[x]^2) / N over its N pooled samples,
-plus, where the tracer samples area lights, the variance of its image, which
+plus, where the tracer samples lights (area lights), the variance of its image, which
 is then the mean of 16 seeds (see :func:`tracer_pooled`), plus a float32
 floor (sigma = 1e-4 |value|, the same precision argument as above, so that
 pixels without any randomness are compared to float precision). Two-sided
@@ -189,7 +189,7 @@ class Verdict:
 def choose_test(scene) -> str:
     """``exact-strata`` or ``tessellated`` for deterministic scenes, ``z-test`` when either
     side samples."""
-    if scene.has_specular() or scene.has_area_lights():
+    if scene.has_specular() or scene.samples_lights():
         return "z-test"
     return "tessellated" if scene.has_tessellated() else "exact-strata"
 
@@ -294,14 +294,14 @@ def ztest_passes(spp: int) -> int:
     return -(-ZTEST_SAMPLES // spp)
 
 
-#: Tracer renders (seeds) pooled where the tracer samples area lights.
+#: Tracer renders (seeds) pooled where the tracer samples lights (area lights).
 TRACER_SEEDS = 16
 
 
 def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndarray]:
     """Mean of ``seeds`` tracer renders and the variance of that mean.
 
-    Where the tracer samples area lights its image is random. The comparison
+    Where the tracer samples lights (area lights) its image is random. The comparison
     then tests its expectation, estimated by the mean of renders with seeds
     0..seeds-1 (the same strata, independent light samples: as one render
     with seeds x spp samples), and the variance of that mean comes from the
@@ -326,23 +326,18 @@ def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndar
 def comparable(scene):
     """The scene with its declared tracer-only parts replaced by what Mitsuba models.
 
-    Schlick's approximation becomes the exact Fresnel equations; a Phong
-    material's ambient term becomes zero. Parts that are not declared stay as
-    they are, so an undeclared tracer-only part fails the comparison rather
-    than being hidden.
+    Each material says what that means for its kind
+    (:meth:`~tracer.materials.base.MaterialModel.comparable`): Schlick's
+    approximation becomes the exact Fresnel equations, a Phong material's
+    ambient term becomes zero. Parts that are not declared stay as they are,
+    so an undeclared tracer-only part fails the comparison rather than being
+    hidden.
     """
     from dataclasses import replace
 
-    from tracer.scene import Dielectric, Phong
-
     if not scene.tracer_only:
         return scene
-    mats = dict(scene.materials)
-    for k, m in mats.items():
-        if "schlick" in scene.tracer_only and isinstance(m, Dielectric):
-            mats[k] = replace(m, fresnel="exact")
-        if "ambient" in scene.tracer_only and isinstance(m, Phong):
-            mats[k] = replace(m, ambient=(0.0, 0.0, 0.0))
+    mats = {k: m.comparable(scene.tracer_only) for k, m in scene.materials.items()}
     return replace(scene, materials=mats)
 
 
@@ -362,13 +357,15 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     from tracer import backend
     from tracer.imageio import write_exr
     from tracer.integrator import Integrator
+    from tracer.scene import TRACER_ONLY
 
     full_scene = scene
     scene = comparable(scene)
     test_name = choose_test(scene)
     needs_var = test_name == "z-test"
-    # The tracer samples only area lights; elsewhere it is deterministic.
-    tracer_random = needs_var and scene.has_area_lights()
+    # The tracer samples only lights (area emitters, or lights that are not delta);
+    # elsewhere it is deterministic.
+    tracer_random = needs_var and scene.samples_lights()
     integ = Integrator(scene)
     integ.render()  # warm-up: compiles the kernels, so that both sides are timed warm
     tr = integ.render(progress)
@@ -396,11 +393,11 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
                    "the expected deviation")
     if tracer_random:
-        reason += (f"; the tracer samples area lights, so its image is the mean of "
+        reason += (f"; the tracer samples lights, so its image is the mean of "
                    f"{TRACER_SEEDS} seeds")
-    for part, used in (("schlick", full_scene.uses_schlick()),
-                       ("ambient", full_scene.uses_ambient())):
-        if used and part not in full_scene.tracer_only:
+    used = full_scene.tracer_only_used()
+    for part in TRACER_ONLY:
+        if part in used and part not in full_scene.tracer_only:
             reason += (f"; this scene uses {part}, which Mitsuba does not model: declare "
                        f"[compare] tracer_only = [\"{part}\"] to check the rest")
     result = Comparison(

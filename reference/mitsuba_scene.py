@@ -24,11 +24,16 @@ paraboloid                a smooth mesh (exact normals at the vertices), fine
                           enough that its chords stay within 1e-4 of its size
 mesh                      ``obj`` / ``ply`` with ``face_normals = !smooth``
 instance + groups         ``shapegroup`` + ``instance``
-phong                     ``twosided`` ``whitted_phong`` (reference/phong_bsdf.py)
+phong                     ``twosided`` ``whitted_phong`` (reference/materials/phong.py)
 checkerboard              ``checkerboard`` with ``to_uv`` a scale
 emitter                   ``area`` with ``radiance``
 integrator                ``whitted`` (reference/integrators.py)
 ========================  ===================================================
+
+Materials and lights are converted by their kinds' modules in
+``reference/materials/`` and ``reference/emitters/`` (each beside its
+``tracer/materials/`` or ``tracer/emitters/`` module), through their
+registries; shapes, the sensor and the integrator are converted here.
 """
 
 from __future__ import annotations
@@ -39,70 +44,28 @@ from xml.sax.saxutils import quoteattr
 
 import numpy as np
 
+# Materials and lights convert in their own modules (reference/materials/,
+# reference/emitters/), through their registries; their entry points are
+# re-exported here ("X as X").
+from reference.emitters import area_tree
+from reference.emitters import emitter_tree as emitter_tree
+from reference.materials import bsdf_tree as bsdf_tree
+from reference.materials import plugin_names
+from reference.materials.textures import texture_tree as texture_tree
+from reference.mitsuba_tree import matrix as _matrix
 from tracer import transform as tf
 from tracer.scene import (
-    Checkerboard,
     Cylinder,
-    Dielectric,
-    Diffuse,
-    DirectionalLight,
     Disk,
     Instance,
     Mesh,
-    Mirror,
     Paraboloid,
-    Phong,
-    PointLight,
     Polygon,
     Rectangle,
     Scene,
     Sphere,
-    SpotLight,
     Triangle,
 )
-
-# Plugin description as a plain tree: {"type": ..., key: value | nested dict}.
-# Values are tagged tuples so that one tree serves both load_dict and XML:
-#   ("rgb", (r, g, b)), ("point", (x, y, z)), ("vector", ...), ("matrix", 4x4),
-#   ("float", x), ("integer", n), ("boolean", b), ("string", s).
-
-
-def _rgb(c) -> dict:
-    return {"type": "rgb", "value": ("rgb", tuple(float(x) for x in c))}
-
-
-def _matrix(m) -> tuple:
-    return ("matrix", tuple(tuple(float(x) for x in row) for row in np.asarray(m)))
-
-
-def texture_tree(tex) -> dict:
-    if isinstance(tex, Checkerboard):
-        return {"type": "checkerboard", "color0": _rgb(tex.color0), "color1": _rgb(tex.color1),
-                "to_uv": ("uvscale", tex.scale)}
-    return _rgb(tex)
-
-
-def bsdf_tree(material) -> dict:
-    if material is None:  # a pure emitter reflects nothing
-        return {"type": "twosided", "material": {"type": "diffuse", "reflectance": _rgb((0, 0, 0))}}
-    if isinstance(material, Diffuse):
-        return {"type": "twosided",
-                "material": {"type": "diffuse", "reflectance": texture_tree(material.reflectance)}}
-    if isinstance(material, Phong):
-        # The ambient term is tracer-only: Mitsuba has no counterpart (see [compare]).
-        return {"type": "twosided",
-                "material": {"type": "whitted_phong", "diffuse": texture_tree(material.diffuse),
-                             "specular": _rgb(material.specular),
-                             "exponent": ("float", material.exponent),
-                             "model": ("string", material.model)}}
-    if isinstance(material, Mirror):
-        return {"type": "twosided",
-                "material": {"type": "conductor", "material": ("string", "none"),
-                             "specular_reflectance": _rgb(material.reflectance)}}
-    if isinstance(material, Dielectric):
-        return {"type": "dielectric", "int_ior": ("float", material.ior),
-                "ext_ior": ("float", material.ext_ior)}
-    raise TypeError(f"no Mitsuba conversion for {type(material).__name__}")
 
 
 def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
@@ -124,29 +87,6 @@ def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
     sensor["sampler"] = {"type": "stratified", "sample_count": ("integer", film.strata ** 2),
                          "jitter": ("boolean", jitter)}
     return sensor
-
-
-def _any_up(axis) -> np.ndarray:
-    a = np.asarray(axis, dtype=np.float64)
-    up = np.array([0.0, 1.0, 0.0]) if abs(a[1]) < 0.9 * np.linalg.norm(a) else np.array([1.0, 0, 0])
-    return up
-
-
-def emitter_tree(light) -> dict:
-    if isinstance(light, PointLight):
-        return {"type": "point", "position": ("point", light.position),
-                "intensity": _rgb(light.intensity)}
-    if isinstance(light, DirectionalLight):
-        return {"type": "directional", "direction": ("vector", light.direction),
-                "irradiance": _rgb(light.irradiance)}
-    if isinstance(light, SpotLight):
-        return {"type": "spot",
-                "to_world": _matrix(tf.look_at(light.position, light.target,
-                                               _any_up(light.axis))),
-                "intensity": _rgb(light.intensity),
-                "cutoff_angle": ("float", light.cutoff_angle),
-                "beam_width": ("float", light.beam_width)}
-    raise TypeError(f"no Mitsuba conversion for {type(light).__name__}")
 
 
 #: Largest distance of a paraboloid's chords from the surface, relative to its size.
@@ -248,7 +188,7 @@ def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape") -> dict:
         raise TypeError(f"no Mitsuba conversion for {type(shape).__name__}")
     t["bsdf"] = bsdf_tree(scene.material_of(shape))
     if shape.emitter is not None:
-        t["emitter"] = {"type": "area", "radiance": _rgb(shape.emitter.radiance)}
+        t["emitter"] = area_tree(shape.emitter)
     return t
 
 
@@ -431,12 +371,14 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
         if tag is None:
             tag = "emitter" if key.startswith("light_") else "shape"
         body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None)
-    needs_phong = any('type="whitted_phong"' in line for line in body)
+    plugins = [name for name in plugin_names()
+               if any(f'type="{name}"' in line for line in body)]
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
             "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
             "--integrator direct for a stock integrator.") if integrator == "whitted" else ""
-    if needs_phong:
-        note += (" Its phong materials use the `whitted_phong` BSDF, registered by "
+    if plugins:
+        note += (" It uses BSDFs written on Mitsuba's API (" +
+                 ", ".join(f"`{name}`" for name in plugins) + "), registered by "
                  "reference.mitsuba().")
     header = [
         '<?xml version="1.0" encoding="utf-8"?>',

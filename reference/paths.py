@@ -5,8 +5,10 @@ follows it: at a mirror one reflected ray, at glass a reflected and (unless
 totally reflected) a refracted ray, at a diffuse surface one shadow ray to
 each light. Segments are projected into the image with the camera's own
 projection. A path that brings light to the eye is labelled from the light
-to the eye (``LDE``, ``LDSE``, ...). Branches whose weight falls below 1e-3
-are not drawn (they cannot change the pixel visibly).
+to the eye (``LDE``, ``LDSE``, ...). Branches whose weight, as the tracer
+carries it (the product of the lobe weights so far, refraction's (n1/n2)^2
+included), falls below 1e-3 are not drawn (they cannot change the pixel
+visibly).
 
 A Whitted tracer makes no LDDE (diffuse light reflected by another diffuse
 surface) and no LSDE (light focused by a mirror or glass onto a diffuse
@@ -53,55 +55,44 @@ def parse_pixel(text: str, width: int, height: int) -> tuple[int, int]:
     return x, y
 
 
-def _light_points(scene):
-    """(position or None for directional, direction, label) of every light to draw rays to."""
-    from tracer.scene import DirectionalLight, Sphere, _Planar
-
-    out = []
-    for light in scene.lights:
-        if isinstance(light, DirectionalLight):
-            out.append((None, -np.asarray(light.direction), None))
-        else:
-            out.append((np.asarray(light.position, dtype=np.float64), None, None))
-    for shape in scene.shapes:
-        if shape.emitter is None:
-            continue
-        if isinstance(shape, Sphere):
-            out.append((np.asarray(shape.center, dtype=np.float64), None, shape))
-        elif isinstance(shape, _Planar):  # rectangles and disks: aim at the centre
-            out.append((shape.corners()[0], None, shape))
-        else:
-            out.append((np.mean(np.asarray(shape.vertices), axis=0), None, shape))
-    return out
-
-
 def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
-    """Follow the centre ray of each pixel through the scene (see module doc)."""
+    """Follow the centre ray of each pixel through the scene (see module doc).
+
+    What happens at a hit is decided by the tracer's own interfaces, as in
+    the integrator: where the material has a smooth part, one shadow ray goes
+    to each light, aimed at the light's middle sample (``Emitter.aim``); each
+    delta lobe spawns a ray with its weight (:mod:`tracer.materials.dispatch`).
+    """
     import drjit as dr
 
     from tracer.backend import jit
     from tracer.camera import generate_rays
-    from tracer.fresnel import fresnel_exact, fresnel_schlick, reflect, refract
+    from tracer.emitters import scene_emitters
     from tracer.geometry import Geometry, spawn_offset
-    from tracer.scene import Dielectric, Diffuse, Mirror, Phong, Sphere
+    from tracer.integrator import SHADOW_EPSILON
+    from tracer.materials.base import ShadingPoint
+    from tracer.materials.dispatch import SceneMaterials
 
     geo = Geometry(scene)
+    materials = SceneMaterials(list(scene.materials.values()))
+    emitters = scene_emitters(scene.lights, geo.emitters)
     W, H = scene.film.width, scene.film.height
 
     def v3(a):
         return jit.Array3f(*(float(x) for x in a))
 
+    def rows(x) -> np.ndarray:
+        return np.asarray(x).T.astype(np.float64)
+
     trees = [Tree(p) for p in pixels]
     fx = np.array([p[0] + 0.5 for p in pixels], dtype=np.float32)
     fy = np.array([p[1] + 0.5 for p in pixels], dtype=np.float32)
     o, d, tmax = generate_rays(scene.camera, W, H, jit.Float(fx), jit.Float(fy))
-    # One entry per live ray: origin, direction, weight, eye-side letters, tree index, kind.
+    # One entry per live ray: origin, direction, tmax, RGB weight, eye-side letters,
+    # tree index, segment kind.
     rays = [(np.asarray(o)[:, i].astype(np.float64), np.asarray(d)[:, i].astype(np.float64),
-             float(np.asarray(tmax)[i]), 1.0, "", i, "camera") for i in range(len(pixels))]
-    lights = _light_points(scene)
+             float(np.asarray(tmax)[i]), np.ones(3), "", i, "camera") for i in range(len(pixels))]
     scale = _scene_scale(scene)
-    names = list(scene.materials)
-    mat_of = np.asarray(geo.material_id)
     emits = np.asarray(geo.radiance).T.max(axis=1) > 0
     for depth in range(1, scene.film.max_depth + 1):
         if not rays:
@@ -111,66 +102,63 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
         T = jit.Float(np.array([r[2] for r in rays], dtype=np.float32))
         hit = geo.closest_hit(O, D, T)
         surf = geo.surface(hit, O, D)
-        prim = np.asarray(hit.prim)
-        P = np.asarray(surf.p).T.astype(np.float64)
-        N = np.asarray(surf.n).T.astype(np.float64)
+        valid = hit.valid
+        # The hit as the integrator shades it (Integrator._level).
+        cos_o = -dr.dot(surf.n, D)
+        cos_sh = -dr.dot(surf.ns, D)
+        ng = dr.select(cos_o >= 0, surf.n, -surf.n)
+        si = ShadingPoint(surf.p, surf.n, surf.ns, surf.uv, D,
+                          dr.select(cos_sh >= 0, surf.ns, -surf.ns), ng, cos_sh)
+        closure = materials.at(dr.gather(jit.UInt32, geo.material_id, hit.prim, valid), si, valid)
+        weights = jit.Array3f(*np.array([r[3] for r in rays]).T.astype(np.float32))
+        slots = [(rows(s.d), rows(s.weight), {k: np.asarray(m) for k, m in s.kinds.items()},
+                  {k: np.asarray(m) for k, m in s.letters.items()})
+                 for s in closure.delta_lobes(weights)]
+        off = spawn_offset(surf.p)
+        front = dr.fma(ng, off, surf.p)
+        shadow = []
+        for light in emitters:
+            u = jit.Array2f(*(np.full(len(rays), a, np.float32) for a in light.aim))
+            wi, dist, _ = light.sample(surf.p, front, u)
+            shadow.append((rows(wi), np.asarray(dist).astype(np.float64)))
+        smooth = np.asarray(closure.smooth)
+        prim, front_side = np.asarray(hit.prim), np.asarray(cos_o) > 0
+        P, N, F = rows(surf.p), rows(ng), rows(front)
+        offs = np.asarray(off).astype(np.float64)
         nxt = []
-        for i, (ro, rd, _, w, letters, ti, kind) in enumerate(rays):
+        for i, (ro, rd, _, _, letters, ti, kind) in enumerate(rays):
             tree = trees[ti]
             if prim[i] == 0xFFFFFFFF:
                 tree.segments.append(Segment(ro, ro + rd * scale, "escape" if kind != "camera"
                                              else "camera", ti))
                 continue
-            p, n = P[i], N[i]
+            p, ns = P[i], N[i]
             tree.segments.append(Segment(ro, p, kind, ti))
-            k = int(prim[i])
-            cos_o = -float(np.dot(n, rd))
-            if emits[k] and cos_o > 0:
+            if emits[int(prim[i])] and front_side[i]:
                 tree.paths.append("L" + letters[::-1] + "E")
             if depth == scene.film.max_depth:
                 continue
-            mid = int(mat_of[k])
-            mat = scene.materials[names[mid]] if mid < len(names) else None
-            ns = n if cos_o >= 0 else -n
-            off = float(np.asarray(spawn_offset(v3(p)))[0])
-            if isinstance(mat, (Diffuse, Phong)) and depth < scene.film.max_depth:
-                origin = p + ns * off
-                for pos, direction, lshape in lights:
-                    if pos is None:
-                        wi, dist = direction / np.linalg.norm(direction), math.inf
-                    else:
-                        if isinstance(lshape, Sphere):  # aim at the sphere's near side
-                            to_c = pos - p
-                            pos = pos - to_c / np.linalg.norm(to_c) * lshape.radius
-                        wi = pos - origin
-                        dist = float(np.linalg.norm(wi))
-                        wi = wi / dist
+            if smooth[i]:
+                origin = F[i]
+                for wi_all, dist_all in shadow:
+                    wi, dist = wi_all[i], float(dist_all[i])
                     if float(np.dot(ns, wi)) <= 0:
                         continue
                     blocked = bool(np.asarray(geo.occluded(
-                        v3(origin), v3(wi), jit.Float(float(dist * (1 - 2e-3)))))[0])
+                        v3(origin), v3(wi), jit.Float(dist * (1 - SHADOW_EPSILON))))[0])
                     end = origin + wi * (dist if math.isfinite(dist) else scale)
                     tree.segments.append(Segment(origin, end, "blocked" if blocked else
                                                  "shadow", ti))
                     if not blocked:
                         tree.paths.append("LD" + letters[::-1] + "E")
-            elif isinstance(mat, Mirror):
-                r = np.asarray(reflect(v3(rd), v3(n))).ravel().astype(np.float64)
-                wr = w * max(mat.reflectance)
-                if wr > DRAW_MIN_WEIGHT:
-                    nxt.append((p + ns * off, r, math.inf, wr, letters + "S", ti, "reflect"))
-            elif isinstance(mat, Dielectric):
-                c = jit.Float(float(cos_o))
-                e = jit.Float(float(mat.eta))
-                fr = fresnel_schlick if mat.fresnel == "schlick" else fresnel_exact
-                R = float(np.asarray(fr(c, e))[0])
-                r = np.asarray(reflect(v3(rd), v3(n))).ravel().astype(np.float64)
-                t, tir = refract(v3(rd), v3(n), e)
-                if w * R > DRAW_MIN_WEIGHT:
-                    nxt.append((p + ns * off, r, math.inf, w * R, letters + "S", ti, "reflect"))
-                if not bool(np.asarray(tir)[0]) and w * (1 - R) > DRAW_MIN_WEIGHT:
-                    nxt.append((p - ns * off, np.asarray(t).ravel().astype(np.float64),
-                                math.inf, w * (1 - R), letters + "S", ti, "refract"))
+            for dirs, ws, kinds, lobe_letters in slots:
+                if ws[i].max() <= DRAW_MIN_WEIGHT:
+                    continue
+                r = dirs[i]
+                side = ns if float(np.dot(ns, r)) >= 0 else -ns
+                seg = "refract" if "transmit" in kinds and kinds["transmit"][i] else "reflect"
+                letter = next(k for k, m in lobe_letters.items() if m[i])
+                nxt.append((p + side * offs[i], r, math.inf, ws[i], letters + letter, ti, seg))
         rays = nxt
         dr.eval()
     return trees

@@ -140,7 +140,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         result, tracer_img, ref_img = compare_scene(scene, work / scene.name)
         entry = scene_entry(result)
         entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
-        if scene.has_specular() or scene.has_area_lights():
+        if scene.has_specular() or scene.samples_lights():
             entry["light_paths"], entry["images"]["light_paths"] = light_paths(scene)
         report.scenes.append(entry)
         report.passed &= result.passed

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from tracer import lights
-from tracer.integrator import _AreaLight
+from tracer.emitters.area import Emitter as AreaLight
 from tracer.scene import AreaEmitter, Rectangle, Sphere
 from tracer.transform import rotate, scale, translate
 
@@ -26,7 +26,7 @@ def _u(jit, n=N, seed=0):
 def _irradiance(jit, light, p, normal):
     """Monte Carlo estimate of E = integral L cos(theta) d(omega) at p with normal n."""
     pp = jit.Array3f(*(np.full(N, c, np.float32) for c in p))
-    wi, _, value = light.incident(pp, pp, _u(jit))
+    wi, _, value = light.sample(pp, pp, _u(jit))
     x = np.asarray(value)[0] * np.maximum(np.asarray(wi).T @ np.asarray(normal), 0)
     return x.mean(), x.std() / math.sqrt(N)
 
@@ -35,7 +35,7 @@ def _irradiance(jit, light, p, normal):
 def test_sphere_light_sampled_by_solid_angle_gives_its_irradiance(jit, dist):
     # On the axis, facing the sphere: E = L pi sin^2(theta_max), sin(theta_max) = r / d.
     sphere = Sphere((0, 0, dist), 1.0, None, AreaEmitter((2.0, 2.0, 2.0)))
-    est, se = _irradiance(jit, _AreaLight(sphere, 0), (0, 0, 0), (0, 0, 1))
+    est, se = _irradiance(jit, AreaLight(sphere, 0), (0, 0, 0), (0, 0, 1))
     expected = 2.0 * math.pi * (1 / dist) ** 2
     assert abs(est - expected) < 5 * se + 1e-6 * expected, (est, expected, se)
 
@@ -69,7 +69,7 @@ def test_rectangle_light_sampled_by_area_gives_its_irradiance(jit, h):
     # four corner rectangles of 1 x 0.6.
     m = translate((0, 0, h)) @ rotate((1, 0, 0), 180) @ scale((1.0, 0.6, 1))
     rect = Rectangle(tuple(map(tuple, m)), None, AreaEmitter((3.0, 3.0, 3.0)))
-    est, se = _irradiance(jit, _AreaLight(rect, 0), (0, 0, 0), (0, 0, 1))
+    est, se = _irradiance(jit, AreaLight(rect, 0), (0, 0, 0), (0, 0, 1))
     expected = 3.0 * 4 * _corner_irradiance(1.0, 0.6, h)
     assert abs(est - expected) < 5 * se, (est, expected, se)
 
@@ -77,7 +77,7 @@ def test_rectangle_light_sampled_by_area_gives_its_irradiance(jit, h):
 def test_rectangle_light_emits_only_from_its_front(jit):
     m = translate((0, 0, 2)) @ scale((1.0, 1.0, 1))  # faces +z, away from the point below
     rect = Rectangle(tuple(map(tuple, m)), None, AreaEmitter((3.0, 3.0, 3.0)))
-    est, _ = _irradiance(jit, _AreaLight(rect, 0), (0, 0, 0), (0, 0, 1))
+    est, _ = _irradiance(jit, AreaLight(rect, 0), (0, 0, 0), (0, 0, 1))
     assert est == 0
 
 
@@ -98,7 +98,7 @@ def test_area_and_solid_angle_measures_convert_by_r2_over_cos(jit):
         jit.Float(cos_l.astype(np.float32))))
     x = np.where(cos_l > 0, L * np.maximum(wi[:, 2], 0) / pdf_w, 0)
     est, se = x.mean(), x.std() / math.sqrt(N)
-    cone_est, cone_se = _irradiance(jit, _AreaLight(
+    cone_est, cone_se = _irradiance(jit, AreaLight(
         Sphere(tuple(center), radius, None, AreaEmitter((L, L, L))), 0), (0, 0, 0), (0, 0, 1))
     expected = L * math.pi * (radius / dist) ** 2
     assert abs(est - expected) < 5 * se

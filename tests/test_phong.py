@@ -281,15 +281,13 @@ def test_phong_factor_on_blinn_phong_would_not_conserve_energy(jit):
 
 
 # ---------------------------------------------------------------------------------------
-# The Mitsuba plugin (reference.phong_bsdf)
+# The Mitsuba plugin (reference/materials/phong.py)
 # ---------------------------------------------------------------------------------------
 
 
 @pytest.fixture(scope="module")
 def mip(mi):
-    """Mitsuba with ``whitted_phong`` registered (the plugin needs the variant set first)."""
-    from reference import phong_bsdf  # noqa: F401
-
+    """Mitsuba with ``whitted_phong`` registered (reference.mitsuba() registers it)."""
     return mi
 
 

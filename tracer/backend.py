@@ -12,6 +12,7 @@ CUDA when a GPU driver answers and LLVM otherwise.
 from __future__ import annotations
 
 import ctypes
+import importlib
 import os
 from types import ModuleType
 
@@ -106,3 +107,29 @@ class _Types:
 
 #: ``jit.Float``, ``jit.UInt32``, ``jit.Array3f``, ... of the selected backend.
 jit = _Types()
+
+
+class _Deferred:
+    """A module imported on its first attribute access (see :func:`deferred`)."""
+
+    def __init__(self, name: str):
+        self._name = name
+
+    def __getattr__(self, attr: str):
+        return getattr(importlib.import_module(self._name), attr)
+
+    def __repr__(self) -> str:
+        return f"<deferred module {self._name!r}>"
+
+
+def deferred(name: str):
+    """The module ``name``, imported when first used rather than now.
+
+    Every material and emitter kind (tracer/materials/, tracer/emitters/) is
+    imported whenever a scene is parsed, and parsing must not start Dr.Jit:
+    a scene is validated first and the backend, with its libLLVM
+    (:mod:`tracer.llvm`), chosen after. The kinds' modules therefore reach
+    Dr.Jit and the formula modules through this:
+    ``dr = deferred("drjit")``, ``fresnel = deferred("tracer.fresnel")``.
+    """
+    return _Deferred(name)

@@ -54,9 +54,6 @@ INVALID = 0xFFFFFFFF
 #: Tables up to this size are unrolled into the kernel with constant numbers.
 UNROLL = 16
 
-# Material kinds, as stored in the material table.
-DIFFUSE, MIRROR, DIELECTRIC, BLACK, PHONG = 0, 1, 2, 3, 4
-
 
 def _v3(rows) -> object:
     a = np.asarray(rows, dtype=np.float32).reshape(-1, 3)

@@ -17,6 +17,13 @@ internal reflection. Rays that miss, end on a diffuse surface or carry zero
 weight spawn nothing, and the next level is compacted to the rays that
 remain, so the cost follows the rays actually traced rather than 2^depth.
 
+The integrator never asks which material or light it holds: at a hit it asks
+the material interface (:mod:`tracer.materials.dispatch`) for the smooth
+part f(wo, wi) to sum over the lights, the delta lobes to follow and any
+emission, and it asks each light (:mod:`tracer.emitters`) for a direction,
+a shadow-ray length and the incident quantity (diffuse and Phong materials
+have a smooth part, mirrors and glass delta lobes).
+
 ``max_depth`` counts path segments as Mitsuba does: 1 sees only emitters,
 2 adds direct light at the first hit, each further unit one more specular
 bounce. The recursion "illumination equation with recursion" of lecture 1 is
@@ -28,7 +35,6 @@ that grows beyond the chunk size is split and processed depth-first.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -36,34 +42,15 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from tracer import backend, fresnel, lights, phong, texture
+from tracer import backend, lights
 from tracer.backend import jit
 from tracer.camera import generate_rays
-from tracer.geometry import (
-    BLACK,
-    DIELECTRIC,
-    DIFFUSE,
-    MIRROR,
-    PHONG,
-    Geometry,
-    Hit,
-    spawn_offset,
-)
+from tracer.emitters import area, scene_emitters
+from tracer.geometry import Geometry, Hit, spawn_offset
+from tracer.materials.base import ShadingPoint
+from tracer.materials.dispatch import SceneMaterials
 from tracer.sampling import pixel_samples, stratified_2d
-from tracer.scene import (
-    Checkerboard,
-    Dielectric,
-    DirectionalLight,
-    Disk,
-    Mirror,
-    Phong,
-    PointLight,
-    Rectangle,
-    Scene,
-    Sphere,
-    SpotLight,
-)
-from tracer.shapes import sphere as sphere_f
+from tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
 #: (for area lights) never counts as an occluder.
@@ -144,160 +131,6 @@ def _count(masks) -> int:
     return sum(int(dr.count(m)[0]) for m in masks)
 
 
-class _Materials:
-    """Material table: kind, colours, Phong parameters, eta, Schlick flag, checkerboards."""
-
-    def __init__(self, scene: Scene):
-        def blank(kind: int) -> dict:
-            return {"kind": kind, "refl": (0, 0, 0), "ks": (0, 0, 0), "p": 1.0, "blinn": False,
-                    "amb": (0, 0, 0), "eta": 1.0, "schlick": False, "checker": False,
-                    "c0": (0, 0, 0), "c1": (0, 0, 0), "scale": (1, 1)}
-
-        rows = []
-        for m in scene.materials.values():
-            row = blank(DIFFUSE)
-            if isinstance(m, Dielectric):
-                row.update(kind=DIELECTRIC, refl=(1, 1, 1), eta=m.eta,
-                           schlick=m.fresnel == "schlick")
-            elif isinstance(m, Mirror):
-                row.update(kind=MIRROR, refl=m.reflectance)
-            else:
-                tex = m.diffuse if isinstance(m, Phong) else m.reflectance
-                if isinstance(tex, Checkerboard):
-                    row.update(checker=True, c0=tex.color0, c1=tex.color1, scale=tex.scale)
-                else:
-                    row.update(refl=tex)
-                if isinstance(m, Phong):
-                    row.update(kind=PHONG, ks=m.specular, p=m.exponent,
-                               blinn=m.model == "blinn-phong", amb=m.ambient)
-            rows.append(row)
-        rows.append(blank(BLACK))  # pure emitters: material index len(materials), black
-
-        def col(key):
-            a = np.asarray([r[key] for r in rows], dtype=np.float32)
-            return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
-
-        self.kind = jit.UInt32(np.asarray([r["kind"] for r in rows], dtype=np.uint32))
-        self.reflectance = col("refl")
-        self.ks = col("ks")
-        self.ambient = col("amb")
-        self.c0, self.c1 = col("c0"), col("c1")
-        sc = np.asarray([r["scale"] for r in rows], dtype=np.float32)
-        self.scale = jit.Array2f(sc[:, 0], sc[:, 1])
-        self.exponent = jit.Float(np.asarray([r["p"] for r in rows], dtype=np.float32))
-        self.blinn = jit.Bool(np.asarray([r["blinn"] for r in rows]))
-        self.checker = jit.Bool(np.asarray([r["checker"] for r in rows]))
-        self.eta = jit.Float(np.asarray([r["eta"] for r in rows], dtype=np.float32))
-        self.schlick = jit.Bool(np.asarray([r["schlick"] for r in rows]))
-        kinds = {r["kind"] for r in rows}
-        self.has_specular = bool(kinds & {MIRROR, DIELECTRIC})
-        self.has_phong = PHONG in kinds
-        self.has_blinn = any(r["blinn"] for r in rows)
-        self.has_checker = any(r["checker"] for r in rows)
-        self.has_ambient = any(any(r["amb"]) for r in rows)
-
-    def diffuse_color(self, mid, uv, active):
-        """kd at the hit: the material's colour, or its checkerboard looked up at uv."""
-        refl = dr.gather(jit.Array3f, self.reflectance, mid, active)
-        if not self.has_checker:
-            return refl
-        checker = dr.gather(jit.Bool, self.checker, mid, active)
-        scale = dr.gather(jit.Array2f, self.scale, mid, active)
-        board = texture.checkerboard(uv, scale, dr.gather(jit.Array3f, self.c0, mid, active),
-                                     dr.gather(jit.Array3f, self.c1, mid, active))
-        return dr.select(checker, board, refl)
-
-
-def _vec(v):
-    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
-
-
-def _col(c):
-    return jit.Array3f(float(c[0]), float(c[1]), float(c[2]))
-
-
-class _DeltaLight:
-    """A point, spot or directional light: one shadow ray per shading point, no sampling."""
-
-    def __init__(self, light):
-        self.light = light
-        if isinstance(light, DirectionalLight):
-            self.direction = _vec(light.direction)
-            self.irradiance = _col(light.irradiance)
-        else:
-            self.position = _vec(light.position)
-            self.intensity = _col(light.intensity)
-            if isinstance(light, SpotLight):
-                self.axis = _vec(light.axis)
-
-    def incident(self, p, p_off):
-        """(wi, shadow-ray tmax, incident factor) at shading points p, shadow rays from p_off."""
-        L = self.light
-        if isinstance(L, DirectionalLight):
-            wi, dist, e = lights.directional(p, self.direction, self.irradiance)
-            return wi, dist, e
-        if isinstance(L, PointLight):
-            wi, _, e = lights.point(p, self.position, self.intensity)
-        else:
-            wi, _, e = lights.spot(p, self.position, self.axis, self.intensity,
-                                   L.cutoff_angle, L.beam_width)
-        return wi, dr.norm(self.position - p_off) * (1 - SHADOW_EPSILON), e
-
-
-class _AreaLight:
-    """An emitting shape, sampled once per shading point (by solid angle for spheres)."""
-
-    def __init__(self, shape, index: int):
-        self.index = index
-        self.radiance = _col(shape.emitter.radiance)
-        self.kind = type(shape).__name__
-        if isinstance(shape, Sphere):
-            self.center, self.radius = _vec(shape.center), float(shape.radius)
-        elif isinstance(shape, (Rectangle, Disk)):
-            c, u, v = shape.corners()
-            self.center, self.u, self.v = _vec(c), _vec(u), _vec(v)
-            self.n = _vec(shape.normal())
-            area = float(np.linalg.norm(np.cross(u, v)))
-            self.area = (math.pi if isinstance(shape, Disk) else 4.0) * area
-        else:
-            p = np.asarray(shape.vertices)
-            self.p0, self.e1, self.e2 = _vec(p[0]), _vec(p[1] - p[0]), _vec(p[2] - p[0])
-            n = np.cross(p[1] - p[0], p[2] - p[0])
-            self.n = _vec(n / np.linalg.norm(n))
-            self.area = 0.5 * float(np.linalg.norm(n))
-
-    def incident(self, p, p_off, sample):
-        """(wi, shadow-ray tmax, L cos / r^2 / pdf) from one light sample per shading point."""
-        if self.kind == "Sphere":
-            to_c = self.center - p
-            dc = dr.norm(to_c)
-            outside = dc > self.radius
-            sin2_max = dr.minimum((self.radius * self.radius) / (dc * dc), 1)
-            cos_max = dr.sqrt(1 - sin2_max)
-            # 1 - cos_max without cancellation, for small and distant spheres
-            x, y, z, pdf = lights.sample_cone(sample, cos_max, sin2_max / (1 + cos_max))
-            w = to_c / dc
-            t1, t2 = lights.coordinate_system(w)
-            wi = dr.normalize(x * t1 + y * t2 + z * w)
-            t0, _, real = sphere_f.roots(p_off, wi, self.center, self.radius)
-            # A grazing sample can miss by rounding: take the tangent distance then.
-            dist = dr.select(real & (t0 > 0), t0, dr.dot(self.center - p_off, wi))
-            value = dr.select(outside, self.radiance / pdf, 0)
-            return wi, dist * (1 - SHADOW_EPSILON), value
-        if self.kind == "Rectangle":
-            y = lights.sample_parallelogram(sample, self.center, self.u, self.v)
-        elif self.kind == "Disk":
-            y = lights.sample_ellipse(sample, self.center, self.u, self.v)
-        else:
-            y = lights.sample_triangle(sample, self.p0, self.e1, self.e2)
-        to_y = y - p
-        dist = dr.norm(to_y)
-        wi = to_y / dist
-        cos_l = -dr.dot(self.n, wi)  # front side emits: the light's normal faces p
-        value = dr.select(cos_l > 0, self.radiance * (cos_l * self.area / (dist * dist)), 0)
-        return wi, dr.norm(y - p_off) * (1 - SHADOW_EPSILON), value
-
-
 class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
@@ -318,9 +151,9 @@ class Integrator:
             self.dfa_accept = jit.Bool(list(self.dfa.accepting))
             self._letter = {c: i for i, c in enumerate(ALPHABET)}
         self.geo = Geometry(scene)
-        self.mat = _Materials(scene)
-        self.delta_lights = [_DeltaLight(light) for light in scene.lights]
-        self.area_lights = [_AreaLight(s, i) for i, s in enumerate(self.geo.emitters)]
+        self.materials = SceneMaterials(list(scene.materials.values()))
+        self.emitters = scene_emitters(scene.lights, self.geo.emitters)
+        self.backgrounds = [e for e in self.emitters if e.infinite]
         if chunk_samples is None:
             chunk_samples = (1 << 24) if backend.name() == "cuda" else (1 << 21)
         self.chunk_samples = chunk_samples
@@ -329,7 +162,7 @@ class Integrator:
 
     def _level(self, b: _Batch, depth: int, L) -> tuple[_Batch | None, int]:
         """Trace one level; add its light to L; return the next level and the shadow-ray count."""
-        scene, geo, mat = self.scene, self.geo, self.mat
+        scene, geo = self.scene, self.geo
         max_depth = scene.film.max_depth
         hit: Hit = geo.closest_hit(b.o, b.d, b.tmax)
         valid = hit.valid
@@ -338,19 +171,22 @@ class Integrator:
         cos_o = -dr.dot(n, b.d)              # > 0: the ray arrives on the front side
         contrib = dr.zeros(jit.Array3f, b.size())
 
-        if self.area_lights:
-            le = dr.gather(jit.Array3f, geo.radiance, hit.prim, valid)
-            seen = valid & (cos_o > 0)
+        if geo.emitters:
+            le, seen = area.emitted(geo.radiance, hit.prim, cos_o, valid)
             if self.dfa is not None:  # the light is the path's L: ... E + L
                 seen &= self._accepts(self._step(b.state, "L"))
             contrib += dr.select(seen, b.weight * le, 0)
+        if self.backgrounds:  # lights at infinity, seen by the rays that escape
+            missed = ~valid
+            if self.dfa is not None:
+                missed &= self._accepts(self._step(b.state, "L"))
+            for light in self.backgrounds:
+                contrib += dr.select(missed, b.weight * light.background(b.d), 0)
 
         children = None
         shadow_masks = []
         if depth < max_depth:
             mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, valid)
-            kind = dr.gather(jit.UInt32, mat.kind, mid, valid)
-            refl = dr.gather(jit.Array3f, mat.reflectance, mid, valid)
             # Two-sided: shading happens on the side the ray arrives from (judged, as
             # Mitsuba's twosided BSDF does, by the shading normal); ray origins move off
             # the surface along the geometric normal.
@@ -359,87 +195,73 @@ class Integrator:
             ng = dr.select(cos_o >= 0, n, -n)
             off = spawn_offset(p)
             p_front = dr.fma(ng, off, p)
-            lit = valid & ((kind == DIFFUSE) | (kind == PHONG))
+            si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
+            mats = self.materials.at(mid, si, valid)
+            lit = mats.smooth
             if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
-                lit &= self._accepts(self._step(self._step(b.state, "D"), "L"))
-            kd = mat.diffuse_color(mid, surf.uv, lit)
-            wo = -b.d
-            if mat.has_phong:
-                is_phong = kind == PHONG
-                ks = dr.gather(jit.Array3f, mat.ks, mid, lit & is_phong)
-                exponent = dr.gather(jit.Float, mat.exponent, mid, lit & is_phong)
-                blinn = dr.gather(jit.Bool, mat.blinn, mid, lit & is_phong)
-                if mat.has_ambient:  # tracer-only: the lecture's "cheapest of all hacks"
-                    amb = dr.gather(jit.Array3f, mat.ambient, mid, lit & is_phong)
-                    contrib += dr.select(lit & is_phong, b.weight * amb, 0)
-            sources = [(light, None) for light in self.delta_lights]
-            sources += [(light, stratified_2d(b.pixel, b.s, scene.film.strata,
-                                              (self.seed * 64 + depth) * 4096 + light.index))
-                        for light in self.area_lights]
-            for light, u in sources:
-                if u is None:
-                    wi, tmax, e = light.incident(p, p_front)
-                else:
-                    wi, tmax, e = light.incident(p, p_front, u)
-                cos = lights.lambert_cosine(nl, wi)
-                f = kd * (1 / math.pi)
-                if mat.has_phong:
-                    fp = phong.phong_brdf(nl, wi, wo, kd, ks, exponent, "phong")
-                    if mat.has_blinn:
-                        fb = phong.phong_brdf(nl, wi, wo, kd, ks, exponent, "blinn-phong")
-                        fp = dr.select(blinn, fb, fp)
-                    f = dr.select(is_phong, fp, f)
-                active = lit & (cos > 0) & (dr.max(e) > 0)
-                # Leave the surface on the side the shadow ray goes to (as Mitsuba's
-                # spawn_ray_to does): with interpolated normals a lit direction can lie
-                # behind the geometric surface near a shadow terminator.
-                origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
-                blocked = geo.occluded(origin, wi, tmax, active)
-                contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
-                shadow_masks.append(active)
-            if mat.has_specular:
-                children = self._specular(b, valid, kind, refl, mid, n_sh, ng, p, off, cos_sh)
+                lit &= self._accepts(self._steps(b.state, "DL"))
+            for mask, value, letters in mats.emission():
+                gate = mask
+                if self.dfa is not None:
+                    gate &= self._accepts(self._steps(b.state, letters))
+                contrib += dr.select(gate, b.weight * value, 0)
+            if self.materials.has_smooth:
+                for light in self.emitters:
+                    u = None
+                    if not light.delta:
+                        u = stratified_2d(b.pixel, b.s, scene.film.strata,
+                                          (self.seed * 64 + depth) * 4096 + light.index)
+                    wi, dist, e = light.sample(p, p_front, u)
+                    tmax = dist * (1 - SHADOW_EPSILON)
+                    cos = lights.lambert_cosine(nl, wi)
+                    f = mats.eval(wi)
+                    active = lit & (cos > 0) & (dr.max(e) > 0)
+                    # Leave the surface on the side the shadow ray goes to (as Mitsuba's
+                    # spawn_ray_to does): with interpolated normals a lit direction can lie
+                    # behind the geometric surface near a shadow terminator.
+                    origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
+                    blocked = geo.occluded(origin, wi, tmax, active)
+                    contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
+                    shadow_masks.append(active)
+            if self.materials.has_delta:
+                children = self._delta(b, mats, si, off)
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
         if children is None:
             dr.eval(L, *shadow_masks)      # one kernel: intersection, shading, shadow rays
             return None, _count(shadow_masks)
-        refl_b, refr_b, keep_r, keep_t = children
-        extra = () if refl_b.state is None else (refl_b.state,)
-        dr.eval(L, *shadow_masks, refl_b.o, refl_b.d, refl_b.weight,
-                refr_b.o, refr_b.d, refr_b.weight, keep_r, keep_t, *extra)
-        nxt = _concat([refl_b.gather(dr.compress(keep_r)), refr_b.gather(dr.compress(keep_t))])
+        dr.eval(L, *shadow_masks, *(x for c, keep in children
+                                    for x in (c.o, c.d, c.weight, keep, c.state)
+                                    if x is not None))
+        nxt = _concat([c.gather(dr.compress(keep)) for c, keep in children])
         return nxt, _count(shadow_masks)
 
-    def _specular(self, b, valid, kind, refl, mid, n, ns, p, off, cos_o):
-        mat = self.mat
-        mirror = valid & (kind == MIRROR)
-        glass = valid & (kind == DIELECTRIC)
-        eta = dr.gather(jit.Float, mat.eta, mid, glass)
-        schlick = dr.gather(jit.Bool, mat.schlick, mid, glass)
-        eta = dr.select(glass, eta, 1.0)
-        r = dr.select(schlick, fresnel.fresnel_schlick(cos_o, eta),
-                      fresnel.fresnel_exact(cos_o, eta))
-        t_dir, tir = fresnel.refract(b.d, n, eta)
-        # Radiance crossing from n_i into n_t is scaled by (n_i / n_t)^2.
-        n_ratio = dr.select(cos_o >= 0, dr.rcp(eta), eta)
-        w_refl = dr.select(mirror, b.weight * refl, dr.select(glass, b.weight * r, 0))
-        w_refr = dr.select(glass & ~tir, b.weight * ((1 - r) * n_ratio * n_ratio), 0)
-        r_dir = fresnel.reflect(b.d, n)
+    def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
+        """The next level's rays: one batch per delta-lobe slot, and which of them to keep."""
         far = dr.full(jit.Float, dr.inf, b.size())
-        # Origins leave the surface on the side each new direction goes to.
-        ng = dr.select(dr.dot(ns, r_dir) >= 0, ns, -ns)
-        state = None
-        if self.dfa is not None:  # a specular vertex: ... + S; dead states carry nothing
-            state = self._step(b.state, "S")
-            alive = state != 0
-            w_refl = dr.select(alive, w_refl, 0)
-            w_refr = dr.select(alive, w_refr, 0)
-        refl_b = _Batch(dr.fma(ng, off, p), r_dir, far, w_refl, b.pixel, b.s, b.slot, state)
-        refr_b = _Batch(dr.fma(dr.select(dr.dot(ns, t_dir) >= 0, ns, -ns), off, p), t_dir, far,
-                        w_refr, b.pixel, b.s, b.slot, state)
-        return (refl_b, refr_b, dr.max(w_refl) > self.min_weight,
-                dr.max(w_refr) > self.min_weight)
+        states: dict = {}
+        out = []
+        for slot in mats.delta_lobes(b.weight):
+            w = slot.weight
+            state = None
+            if self.dfa is not None:  # a specular vertex: ... + S; dead states carry nothing
+                for letter, mask in slot.letters.items():
+                    if letter not in states:
+                        states[letter] = self._steps(b.state, letter)
+                    state = (states[letter] if state is None else
+                             dr.select(mask, states[letter], state))
+                w = dr.select(state != 0, w, 0)
+            # Origins leave the surface on the side each new direction goes to.
+            side = dr.select(dr.dot(si.ng, slot.d) >= 0, si.ng, -si.ng)
+            child = _Batch(dr.fma(side, off, si.p), slot.d, far, w, b.pixel, b.s, b.slot, state)
+            out.append((child, dr.max(w) > self.min_weight))
+        return out
+
+    def _steps(self, state, letters: str):
+        """The DFA state after reading ``letters`` (none: unchanged)."""
+        for letter in letters:
+            state = self._step(state, letter)
+        return state
 
     def _step(self, state, letter: str):
         return dr.gather(jit.UInt32, self.dfa_trans, state * len(self._letter) +

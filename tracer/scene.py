@@ -7,6 +7,10 @@ reference. Any input the contract calls bad is refused by :func:`load_scene`
 with a :class:`~tracer.errors.SceneError` naming the file, the key and what was
 expected, before anything renders.
 
+Each material and light kind is parsed by its own module (``tracer/materials/``,
+``tracer/emitters/``), found through their registries by the ``type`` key;
+this module reads the rest (film, camera, shapes, groups, ``[compare]``).
+
 Two lines load and render a scene::
 
     >>> from tracer import load_scene, render            # doctest: +SKIP
@@ -23,8 +27,27 @@ from typing import Any
 
 import numpy as np
 
+# The kinds that used to be defined here are re-exported ("X as X"), so that
+# ``from tracer.scene import Diffuse`` keeps working.
+from tracer import emitters as _emitters
+from tracer import materials as _materials
 from tracer import transform as tf
+from tracer.emitters import area as _area
+from tracer.emitters.area import AreaEmitter as AreaEmitter
+from tracer.emitters.base import LightModel
+from tracer.emitters.directional import DirectionalLight as DirectionalLight
+from tracer.emitters.point import PointLight as PointLight
+from tracer.emitters.spot import SpotLight as SpotLight
 from tracer.errors import SceneError
+from tracer.materials.base import MaterialModel
+from tracer.materials.dielectric import Dielectric as Dielectric
+from tracer.materials.diffuse import Diffuse as Diffuse
+from tracer.materials.mirror import Mirror as Mirror
+from tracer.materials.phong import Phong as Phong
+from tracer.materials.textures import Checkerboard as Checkerboard
+from tracer.materials.textures import Texture as Texture
+from tracer.materials.textures import parse_texture
+from tracer.materials.textures import texture_max as texture_max
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]
@@ -64,97 +87,10 @@ class Camera:
         return tf.look_at(self.origin, self.target, self.up)
 
 
-@dataclass(frozen=True)
-class Checkerboard:
-    """Mitsuba's checkerboard texture: color0 where frac(u') > 1/2 equals frac(v') > 1/2.
-
-    (u', v') = (scale_u u, scale_v v) for the shape's own texture coordinates.
-    """
-    color0: Color = (0.4, 0.4, 0.4)
-    color1: Color = (0.2, 0.2, 0.2)
-    scale: tuple[float, float] = (1.0, 1.0)
-
-    def max(self) -> float:
-        return max(max(self.color0), max(self.color1))
-
-
-Texture = Color | Checkerboard
-
-
-def texture_max(t: Texture) -> float:
-    return t.max() if isinstance(t, Checkerboard) else max(t)
-
-
-@dataclass(frozen=True)
-class Diffuse:
-    name: str
-    reflectance: Texture = (0.5, 0.5, 0.5)
-
-
-@dataclass(frozen=True)
-class Mirror:
-    name: str
-    reflectance: Color = (1.0, 1.0, 1.0)
-
-
-@dataclass(frozen=True)
-class Dielectric:
-    name: str
-    ior: float = 1.5
-    ext_ior: float = 1.0
-    fresnel: str = "exact"  # or "schlick" (tracer only; Mitsuba is always exact)
-
-    @property
-    def eta(self) -> float:
-        return self.ior / self.ext_ior
-
-
-@dataclass(frozen=True)
-class Phong:
-    """kd / pi + ks N(p) cos^p: Phong (reflected direction) or Blinn-Phong (half vector)."""
-    name: str
-    diffuse: Texture = (0.5, 0.5, 0.5)
-    specular: Color = (0.2, 0.2, 0.2)
-    exponent: float = 32.0
-    model: str = "phong"               # or "blinn-phong"
-    ambient: Color = (0.0, 0.0, 0.0)   # tracer-only: radiance added at every hit
-
-
-Material = Diffuse | Mirror | Dielectric | Phong
-
-
-@dataclass(frozen=True)
-class PointLight:
-    position: Vec3
-    intensity: Color  # W/sr
-
-
-@dataclass(frozen=True)
-class DirectionalLight:
-    direction: Vec3   # unit vector, the direction the light travels
-    irradiance: Color  # W/m^2, measured normal to the direction
-
-
-@dataclass(frozen=True)
-class SpotLight:
-    position: Vec3
-    target: Vec3
-    intensity: Color  # W/sr on the axis
-    cutoff_angle: float = 20.0
-    beam_width: float = 15.0
-
-    @property
-    def axis(self) -> Vec3:
-        d = np.subtract(self.target, self.position)
-        return tuple(float(x) for x in d / np.linalg.norm(d))
-
-
-Light = PointLight | DirectionalLight | SpotLight
-
-
-@dataclass(frozen=True)
-class AreaEmitter:
-    radiance: Color  # W/(m^2 sr), emitted from the front side
+# Materials and lights: one module per kind (tracer/materials/, tracer/emitters/), found
+# through their registries; the kinds that were defined here are re-exported.
+Material = MaterialModel
+Light = LightModel
 
 
 @dataclass(frozen=True)
@@ -332,22 +268,31 @@ class Scene:
         return [m for k, m in self.materials.items() if k in names]
 
     def has_specular(self) -> bool:
-        return any(isinstance(m, (Mirror, Dielectric)) for m in self.used_materials())
+        """Some material in use has delta lobes (mirror reflection, refraction)."""
+        return any(_materials.module_of(m).BSDF.lobes for m in self.used_materials())
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
 
+    def samples_lights(self) -> bool:
+        """The tracer samples some light at random (area emitters, or a light kind that is
+        not delta): its image is then an estimate with variance."""
+        return self.has_area_lights() or any(
+            not _emitters.LIGHTS[_emitters.type_of(light)].Emitter.delta for light in self.lights)
+
+    def tracer_only_used(self) -> frozenset[str]:
+        """The tracer-only parts (see ``TRACER_ONLY``) that materials in use have."""
+        return frozenset().union(*(m.tracer_only_used() for m in self.used_materials()))
+
     def uses_schlick(self) -> bool:
-        return any(isinstance(m, Dielectric) and m.fresnel == "schlick"
-                   for m in self.used_materials())
+        return "schlick" in self.tracer_only_used()
 
     def uses_ambient(self) -> bool:
-        return any(isinstance(m, Phong) and any(m.ambient) for m in self.used_materials())
+        return "ambient" in self.tracer_only_used()
 
     def uses_textures(self) -> bool:
-        return any(isinstance(getattr(m, "reflectance", None), Checkerboard) or
-                   isinstance(getattr(m, "diffuse", None), Checkerboard)
-                   for m in self.used_materials())
+        return any(isinstance(t, Checkerboard) for m in self.used_materials()
+                   for t in m.textures())
 
     def has_tessellated(self) -> bool:
         """Shapes Mitsuba lacks, which the conversion tessellates (paraboloids)."""
@@ -490,15 +435,18 @@ def _vec3(t: _Table, key: str, v, nonzero: bool = False) -> Vec3:
 
 SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
                "mesh", "instance")
-MATERIAL_TYPES = ("diffuse", "mirror", "dielectric", "phong")
-#: Shapes that may carry an area emitter (the tracer samples them).
-EMITTER_SHAPES = ("sphere", "rectangle", "triangle", "disk")
-LIGHT_TYPES = ("point", "directional", "spot")
+#: Material ``type``s: the registry of tracer/materials/.
+MATERIAL_TYPES = tuple(_materials.REGISTRY)
+#: Shapes that may carry an area emitter (the tracer samples them): tracer/emitters/area.py.
+EMITTER_SHAPES = tuple(_area.SAMPLERS)
+#: ``[[lights]]`` ``type``s: the registry of tracer/emitters/.
+LIGHT_TYPES = tuple(_emitters.LIGHTS)
 CAMERA_TYPES = ("perspective", "orthographic")
 TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare",
              "groups")
-#: Features a scene may declare tracer-only: Mitsuba has no counterpart.
-TRACER_ONLY = ("schlick", "ambient")
+#: Features a scene may declare tracer-only: Mitsuba has no counterpart (each kind
+#: names its own, e.g. Schlick's approximation of the dielectric, the Phong ambient term).
+TRACER_ONLY = _materials.tracer_only_parts()
 
 
 def load_scene(path: str | Path) -> Scene:
@@ -601,69 +549,20 @@ def _parse_camera(t: _Table) -> Camera:
     return cam
 
 
-def _texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Texture:
-    """A colour, or ``{ checkerboard = { color0, color1, scale } }``."""
-    v = t.raw(key, default, "a colour or { checkerboard = {...} }")
-    if isinstance(v, dict):
-        tex = _Table(t.path, t._k(key), v)
-        cb = tex.table("checkerboard")
-        sc = cb.raw("scale", 1.0)
-        if isinstance(sc, (int, float)) and not isinstance(sc, bool):
-            sc = [sc, sc]
-        if (not isinstance(sc, list) or len(sc) != 2 or
-                any(isinstance(x, bool) or not isinstance(x, (int, float)) or
-                    not math.isfinite(x) or x <= 0 for x in sc)):
-            cb.fail("scale", f"expected a positive number or [su, sv], got {_show(sc)}")
-        board = Checkerboard(cb.color("color0", 0.4, hi=hi), cb.color("color1", 0.2, hi=hi),
-                             (float(sc[0]), float(sc[1])))
-        cb.finish()
-        tex.finish(" (textures: checkerboard)")
-        return board
-    return t.color(key, default, hi=hi)
+#: A colour, or ``{ checkerboard = {...} }`` (tracer/materials/textures.py).
+_texture = parse_texture
 
 
 def _parse_material(t: _Table, name: str) -> Material:
-    kind = t.string("type", choices=MATERIAL_TYPES)
-    if kind == "diffuse":
-        m = Diffuse(name, _texture(t, "reflectance", 0.5))
-    elif kind == "mirror":
-        m = Mirror(name, t.color("reflectance", 1.0, hi=1.0))
-    elif kind == "dielectric":
-        m = Dielectric(name, ior=t.number("ior", 1.5, lo=0, lo_open=True),
-                       ext_ior=t.number("ext_ior", 1.0, lo=0, lo_open=True),
-                       fresnel=t.string("fresnel", "exact", ("exact", "schlick")))
-    else:
-        diffuse = _texture(t, "diffuse", 0.5)
-        specular = t.color("specular", 0.2, hi=1.0)
-        m = Phong(name, diffuse, specular,
-                  exponent=t.number("exponent", 32.0, lo=0, lo_open=True, hi=1e4),
-                  model=t.string("model", "phong", ("phong", "blinn-phong")),
-                  ambient=t.color("ambient", 0.0))
-        kd = diffuse.color0 if isinstance(diffuse, Checkerboard) else diffuse
-        kds = [diffuse.color0, diffuse.color1] if isinstance(diffuse, Checkerboard) else [kd]
-        for k in kds:
-            if any(a + b > 1 + 1e-9 for a, b in zip(k, specular, strict=True)):
-                t.fail("specular", "expected diffuse + specular <= 1 in every channel "
-                                   "(beyond that the BRDF creates energy)")
+    kind = t.string("type", choices=tuple(_materials.REGISTRY))
+    m = _materials.REGISTRY[kind].parse(t, name)
     t.finish()
     return m
 
 
 def _parse_light(t: _Table) -> Light:
-    kind = t.string("type", choices=LIGHT_TYPES)
-    if kind == "point":
-        light = PointLight(t.vec3("position"), t.color("intensity"))
-    elif kind == "directional":
-        d = np.asarray(t.vec3("direction", nonzero=True))
-        light = DirectionalLight(tuple(float(x) for x in d / np.linalg.norm(d)),
-                                 t.color("irradiance"))
-    else:
-        position, target = t.vec3("position"), t.vec3("target")
-        if position == target:
-            t.fail("target", "expected a point different from position")
-        cutoff = t.number("cutoff_angle", 20.0, lo=0, hi=180, lo_open=True, hi_open=True)
-        beam = t.number("beam_width", 0.75 * cutoff, lo=0, hi=cutoff)
-        light = SpotLight(position, target, t.color("intensity"), cutoff, beam)
+    kind = t.string("type", choices=tuple(_emitters.LIGHTS))
+    light = _emitters.LIGHTS[kind].parse(t)
     t.finish()
     return light
 
@@ -730,11 +629,11 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
         t.fail("type", "a group may not contain instances (nested instancing is not supported)")
     emitter = None
     if t.has("emitter"):
-        if kind not in EMITTER_SHAPES or in_group:
-            t.fail("emitter", "area lights are supported on " + ", ".join(EMITTER_SHAPES) +
+        if kind not in _area.SAMPLERS or in_group:
+            t.fail("emitter", "area lights are supported on " + ", ".join(_area.SAMPLERS) +
                    (" outside groups" if in_group else "") + f", not on a {kind}")
         e = t.table("emitter")
-        emitter = AreaEmitter(e.color("radiance"))
+        emitter = _area.parse(e)
         e.finish()
     if kind == "instance":
         material = None

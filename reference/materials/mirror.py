@@ -1,0 +1,17 @@
+"""Mitsuba conversion of ``mirror`` (tracer/materials/mirror.py).
+
+A two-sided ``conductor`` with ``material = "none"`` (Fresnel reflectance 1)
+and ``specular_reflectance`` the mirror's colour: one delta lobe of weight
+``reflectance``, as in the tracer.
+"""
+
+from __future__ import annotations
+
+from reference.mitsuba_tree import rgb
+from tracer.materials.mirror import Mirror
+
+
+def mitsuba(m: Mirror) -> dict:
+    return {"type": "twosided",
+            "material": {"type": "conductor", "material": ("string", "none"),
+                         "specular_reflectance": rgb(m.reflectance)}}

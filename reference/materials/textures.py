@@ -1,0 +1,14 @@
+"""Mitsuba conversion of texture parameters (tracer/materials/textures.py)."""
+
+from __future__ import annotations
+
+from reference.mitsuba_tree import rgb
+from tracer.materials.textures import Checkerboard, Texture
+
+
+def texture_tree(tex: Texture) -> dict:
+    """Mitsuba's ``checkerboard`` (``to_uv`` a scale) or an ``rgb`` colour."""
+    if isinstance(tex, Checkerboard):
+        return {"type": "checkerboard", "color0": rgb(tex.color0), "color1": rgb(tex.color1),
+                "to_uv": ("uvscale", tex.scale)}
+    return rgb(tex)

@@ -1,0 +1,31 @@
+"""The plugin tree: Mitsuba 3 plugins described as plain data, for ``load_dict`` and for XML.
+
+A plugin is ``{"type": ..., key: value | nested plugin}``. Values are tagged
+tuples so that one tree serves both ``mi.load_dict`` and the XML writer
+(:mod:`reference.mitsuba_scene`): ``("rgb", (r, g, b))``, ``("point", (x, y, z))``,
+``("vector", ...)``, ``("matrix", 4x4)``, ``("uvscale", (su, sv))``,
+``("float", x)``, ``("integer", n)``, ``("boolean", b)``, ``("string", s)``.
+The conversions of the material and emitter kinds (``reference/materials/``,
+``reference/emitters/``) build their trees with these helpers.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def rgb(c) -> dict:
+    """An ``rgb`` texture of a colour."""
+    return {"type": "rgb", "value": ("rgb", tuple(float(x) for x in c))}
+
+
+def matrix(m) -> tuple:
+    """A 4x4 transform."""
+    return ("matrix", tuple(tuple(float(x) for x in row) for row in np.asarray(m)))
+
+
+def any_up(axis) -> np.ndarray:
+    """An up vector not parallel to ``axis`` (for look_at frames of lights)."""
+    a = np.asarray(axis, dtype=np.float64)
+    return np.array([0.0, 1.0, 0.0]) if abs(a[1]) < 0.9 * np.linalg.norm(a) else \
+        np.array([1.0, 0, 0])

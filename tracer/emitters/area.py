@@ -1,0 +1,169 @@
+"""Area emitters on shapes: ``emitter = { radiance = [...] }``.
+
+A shape with an emitter emits radiance L (W/(m^2 sr)) from its front side,
+the side its normal points to (Mitsuba's ``area`` emitter). The tracer uses
+it twice:
+
+* a ray that hits the front side brings L back (:func:`emitted`);
+* at a shading point it is one light, sampled once per sample
+  (:class:`Emitter`), by the sampler of its shape kind: uniform by area
+  (rectangle, disk, triangle), estimating integral L cos(theta_l) / r^2 dA
+  as L cos(theta_l) A / r^2, or, for a sphere, uniform in the cone of
+  directions it subtends, estimating integral L d(omega) as L / pdf (the two
+  estimators of :mod:`tracer.lights`, which holds the sampling maps).
+
+Each emitting shape kind has one sampler class below and one line in
+:data:`SAMPLERS`; nothing else asks which shape it holds.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tracer.backend import deferred, jit
+from tracer.emitters import base
+
+if TYPE_CHECKING:
+    from tracer.scene import _Table
+
+dr = deferred("drjit")
+lights = deferred("tracer.lights")
+sphere_f = deferred("tracer.shapes.sphere")
+
+Color = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class AreaEmitter:
+    radiance: Color  # W/(m^2 sr), emitted from the front side
+
+
+def parse(t: _Table) -> AreaEmitter:
+    return AreaEmitter(t.color("radiance"))
+
+
+def emitted(radiance_table, prim, cos_o, valid):
+    """(L, lanes) of rays that hit an emitting primitive on its front side (cos_o > 0).
+
+    ``radiance_table`` holds each primitive's radiance (zero for shapes that do
+    not emit), ``cos_o`` = -d . n is positive where the ray arrives on the side
+    the geometric normal points to.
+    """
+    return dr.gather(jit.Array3f, radiance_table, prim, valid), valid & (cos_o > 0)
+
+
+# ----------------------------------------------------------------------------- samplers
+
+
+class _SphereCone:
+    """A sphere sampled uniformly in the cone of directions it subtends (solid angle)."""
+    aim = (0.0, 0.0)  # the cone's axis: towards the centre
+
+    def __init__(self, shape):
+        self.center, self.radius = base.vec(shape.center), float(shape.radius)
+
+    def sample(self, radiance, p, origin, u):
+        to_c = self.center - p
+        dc = dr.norm(to_c)
+        outside = dc > self.radius
+        sin2_max = dr.minimum((self.radius * self.radius) / (dc * dc), 1)
+        cos_max = dr.sqrt(1 - sin2_max)
+        # 1 - cos_max without cancellation, for small and distant spheres
+        x, y, z, pdf = lights.sample_cone(u, cos_max, sin2_max / (1 + cos_max))
+        w = to_c / dc
+        t1, t2 = lights.coordinate_system(w)
+        wi = dr.normalize(x * t1 + y * t2 + z * w)
+        t0, _, real = sphere_f.roots(origin, wi, self.center, self.radius)
+        # A grazing sample can miss by rounding: take the tangent distance then.
+        dist = dr.select(real & (t0 > 0), t0, dr.dot(self.center - origin, wi))
+        return wi, dist, dr.select(outside, radiance / pdf, 0)
+
+
+class _Flat:
+    """A flat shape sampled uniformly by area: L cos(theta_l) A / r^2 from its front side."""
+    aim = (0.5, 0.5)
+
+    def point(self, u):
+        raise NotImplementedError
+
+    def sample(self, radiance, p, origin, u):
+        y = self.point(u)
+        to_y = y - p
+        dist = dr.norm(to_y)
+        wi = to_y / dist
+        cos_l = -dr.dot(self.n, wi)  # front side emits: the light's normal faces p
+        value = dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
+        return wi, dr.norm(y - origin), value
+
+
+class _Parallelogram(_Flat):
+    """Mitsuba's rectangle [-1, 1]^2 under to_world: a parallelogram of area 4 |u x v|."""
+    #: area of the local shape: the square [-1, 1]^2
+    local_area = 4.0
+
+    def __init__(self, shape):
+        c, u, v = shape.corners()
+        self.center, self.u, self.v = base.vec(c), base.vec(u), base.vec(v)
+        self.n = base.vec(shape.normal())
+        self.area = self.local_area * float(np.linalg.norm(np.cross(u, v)))
+
+    def point(self, u):
+        return lights.sample_parallelogram(u, self.center, self.u, self.v)
+
+
+class _Ellipse(_Parallelogram):
+    """Mitsuba's unit disk under to_world: an ellipse of area pi |u x v|."""
+    local_area = math.pi
+
+    def point(self, u):
+        return lights.sample_ellipse(u, self.center, self.u, self.v)
+
+
+class _Triangle(_Flat):
+    """A triangle of area |e1 x e2| / 2, sampled by the square-root warp."""
+    aim = (4 / 9, 0.5)  # barycentrics (1/3, 1/3): the centroid
+
+    def __init__(self, shape):
+        p = np.asarray(shape.vertices)
+        self.p0, self.e1, self.e2 = base.vec(p[0]), base.vec(p[1] - p[0]), base.vec(p[2] - p[0])
+        n = np.cross(p[1] - p[0], p[2] - p[0])
+        self.n = base.vec(n / np.linalg.norm(n))
+        self.area = 0.5 * float(np.linalg.norm(n))
+
+    def point(self, u):
+        return lights.sample_triangle(u, self.p0, self.e1, self.e2)
+
+
+#: Shape ``type`` -> how an emitter on it is sampled (one line per emitting shape kind).
+#: The order is that of the scene format's error message.
+SAMPLERS: dict[str, type] = {
+    "sphere": _SphereCone,
+    "rectangle": _Parallelogram,
+    "triangle": _Triangle,
+    "disk": _Ellipse,
+}
+
+
+def shape_type(shape) -> str:
+    """The TOML ``type`` of a shape model: its class name in lower case (``Sphere``: sphere)."""
+    return type(shape).__name__.lower()
+
+
+class Emitter(base.Emitter):
+    """The area emitter of one shape, as a light sampled once per shading point."""
+    delta = False
+
+    def __init__(self, shape, index: int = 0):
+        #: the emitter's place among the sampled lights (it chooses the random stream)
+        self.index = index
+        self.radiance = base.color(shape.emitter.radiance)
+        self.sampler = SAMPLERS[shape_type(shape)](shape)
+        self.aim = self.sampler.aim
+
+    def sample(self, p, origin, u):
+        """(wi, distance, L cos / r^2 / pdf) from one light sample ``u`` per shading point."""
+        return self.sampler.sample(self.radiance, p, origin, u)

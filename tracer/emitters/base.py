@@ -1,0 +1,70 @@
+"""The emitter interface: what the tracer asks of a light source.
+
+Modelled on Mitsuba 3's emitter plugins (``src/emitters/*.cpp``, one
+interface: ``sample_direction``, ``eval``) and pbrt-v4's lights
+(``src/pbrt/lights.h``: ``SampleLi``, ``L``, ``Le``), cut to what a Whitted
+tracer needs:
+
+* :meth:`Emitter.sample`: for shading points p, the unit direction wi
+  towards the light, the length of the shadow ray from its origin to the
+  light, and the incident quantity that multiplies f cos (lecture 1,
+  "Light attenuation"; for area lights an estimator of integral L d(omega));
+* :meth:`Emitter.background`: for a light at infinity (``infinite``), the
+  radiance a ray that escapes the scene brings back;
+* area emitters on shapes also emit where a ray hits their front side
+  (:func:`tracer.emitters.area.emitted`).
+
+A ``[[lights]]`` kind is one module of :mod:`tracer.emitters` holding its
+scene-model dataclass (a :class:`LightModel`), ``parse(table)`` and
+``Emitter``; area emitters on shapes are :mod:`tracer.emitters.area`, with
+one sampler per emitting shape kind. The formulas stay in :mod:`tracer.lights`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+from tracer.backend import jit
+
+
+@dataclass(frozen=True)
+class LightModel:
+    """A ``[[lights]]`` entry of the scene model (one dataclass per kind)."""
+
+
+class Emitter:
+    """A light source of a scene, built once per scene (see the module docstring)."""
+    #: One direction per shading point: :meth:`sample` ignores ``u``.
+    delta: ClassVar[bool] = True
+    #: At infinity: rays that escape the scene bring back :meth:`background`.
+    infinite: ClassVar[bool] = False
+    #: The sample ``u`` that lands in the middle of the light (the ray trees aim there).
+    aim: tuple[float, float] = (0.5, 0.5)
+    #: Place among the scene's sampled (not delta) lights: chooses its random stream.
+    index: int = 0
+
+    def sample(self, p, origin, u) -> tuple[Any, Any, Any]:
+        """(wi, distance, value) for shading points ``p`` (Array3f).
+
+        ``wi``: unit direction from p towards the light (its sampled point);
+        ``distance``: from the shadow ray's ``origin`` (p moved off the
+        surface) to that point, inf for a light at infinity; ``value``: the
+        incident quantity multiplying f(wo, wi) cos(theta_i) (Array3f);
+        ``u``: a 2D sample in [0, 1)^2 (Array2f), unused by delta lights.
+        """
+        raise NotImplementedError
+
+    def background(self, d):
+        """Radiance (Array3f) brought back by rays escaping along the unit ``d`` (``infinite``)."""
+        raise NotImplementedError(f"{type(self).__module__} is not at infinity")
+
+
+def vec(v) -> Any:
+    """A constant 3-vector (position, direction) written into the kernel."""
+    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+
+
+def color(c) -> Any:
+    """A constant RGB value written into the kernel."""
+    return jit.Array3f(float(c[0]), float(c[1]), float(c[2]))

@@ -1,0 +1,49 @@
+"""``type = "directional"``: light arriving from one direction, irradiance E (W/m^2).
+
+E is measured on a plane normal to the light, so the incident factor is E,
+constant, and the shadow ray is unbounded (lecture 1, "Directional lights";
+:func:`tracer.lights.directional`). Mitsuba's ``directional`` emitter is the
+same (``reference/emitters/directional.py``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from tracer.backend import deferred
+from tracer.emitters import base
+
+if TYPE_CHECKING:
+    from tracer.scene import _Table
+
+lights = deferred("tracer.lights")
+
+Vec3 = tuple[float, float, float]
+Color = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class DirectionalLight(base.LightModel):
+    direction: Vec3   # unit vector, the direction the light travels
+    irradiance: Color  # W/m^2, measured normal to the direction
+
+
+MODEL = DirectionalLight
+
+
+def parse(t: _Table) -> DirectionalLight:
+    d = np.asarray(t.vec3("direction", nonzero=True))
+    return DirectionalLight(tuple(float(x) for x in d / np.linalg.norm(d)),
+                            t.color("irradiance"))
+
+
+class Emitter(base.Emitter):
+    def __init__(self, light: DirectionalLight):
+        self.direction = base.vec(light.direction)
+        self.irradiance = base.color(light.irradiance)
+
+    def sample(self, p, origin, u):
+        return lights.directional(p, self.direction, self.irradiance)

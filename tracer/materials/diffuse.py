@@ -1,0 +1,50 @@
+"""``type = "diffuse"``: Lambertian reflection, f = reflectance / pi.
+
+Lambert's law (lecture 1, "The illumination equation"; pbrt-v4,
+``DiffuseBxDF``, section 9.2): the surface scatters the light it receives
+equally in all directions, so the BRDF is a constant, and energy conservation
+bounds it by 1 / pi (the integral of cos over the hemisphere is pi). The
+reflectance is a colour or a checkerboard. Mitsuba's counterpart is the
+``diffuse`` plugin, made two-sided (``reference/materials/diffuse.py``).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+from tracer.materials import base
+from tracer.materials.textures import Texture, TextureTable, parse_texture
+
+if TYPE_CHECKING:
+    from tracer.scene import _Table
+
+
+@dataclass(frozen=True)
+class Diffuse(base.MaterialModel):
+    reflectance: Texture = (0.5, 0.5, 0.5)
+
+    def textures(self) -> tuple:
+        return (self.reflectance,)
+
+
+MODEL = Diffuse
+
+
+def parse(t: _Table, name: str) -> Diffuse:
+    return Diffuse(name, parse_texture(t, "reflectance", 0.5))
+
+
+class BSDF(base.BSDF):
+    smooth = True
+
+    def __init__(self, materials: list[Diffuse]):
+        super().__init__(materials)
+        self.kd = TextureTable([m.reflectance for m in materials])
+
+    def params(self, row, si, active):
+        return self.kd.eval(row, si.uv, active)
+
+    def eval(self, kd, si, wi):
+        return kd * (1 / math.pi)

@@ -1,0 +1,135 @@
+"""The one place that dispatches over material kinds, for whole wavefronts at once.
+
+:class:`SceneMaterials` builds each kind's :class:`~tracer.materials.base.BSDF`
+once per scene (only the kinds the scene has) and a table from material id
+to (kind, row). At a wavefront of hits, :meth:`SceneMaterials.at` gathers
+each lane's kind and row, and every present kind gathers its parameters under
+its own mask; the returned :class:`Closure` answers the integrator's three
+questions by evaluating each present kind under its mask and selecting per
+lane. The integrator never asks which kind a lane holds.
+
+Why masks and not Dr.Jit's ``dr.switch`` (an indirect call per lane): a scene
+has a handful of kinds, each a few dozen instructions, and on the LLVM backend
+the masked evaluation of every present kind inside the one kernel per level
+was never slower than the symbolic calls on the built-in scenes, and up to
+1.17 times faster (``benchmarks/bench_dispatch.py``; ``docs/extending.md``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import drjit as dr
+import numpy as np
+
+from tracer.backend import jit
+from tracer.materials import REGISTRY, type_of
+from tracer.materials.base import MaterialModel, ShadingPoint
+
+
+@dataclass
+class Slot:
+    """One delta-lobe slot over a wavefront: the direction and weight per lane.
+
+    ``letters`` and ``kinds`` map each lobe letter (``"S"``, ``""``) and each
+    lobe kind (``"reflect"``, ``"transmit"``) to the mask of lanes that have it.
+    """
+    d: Any
+    weight: Any
+    letters: dict[str, Any] = field(default_factory=dict)
+    kinds: dict[str, Any] = field(default_factory=dict)
+
+
+def _or(masks: list, fallback):
+    """The union of the masks that are not None (``fallback`` if none is)."""
+    out = None
+    for m in masks:
+        if m is not None:
+            out = m if out is None else out | m
+    return fallback if out is None else out
+
+
+class Closure:
+    """The materials at one wavefront of hits (see the module docstring)."""
+
+    def __init__(self, parts: list, si: ShadingPoint, valid):
+        self.parts = parts          # (bsdf, mask, params) of each present kind
+        self.si = si
+        no = dr.zeros(jit.Bool, dr.width(valid))
+        #: lanes whose material has a smooth part (direct light is summed there)
+        self.smooth = _or([mask for bsdf, mask, _ in parts if bsdf.smooth], no)
+
+    def eval(self, wi):
+        """f(wo, wi) of the smooth part of each lane's material (no cosine)."""
+        f = None
+        for bsdf, mask, prm in self.parts:
+            if bsdf.smooth:
+                fk = bsdf.eval(prm, self.si, wi)
+                f = fk if f is None else dr.select(mask, fk, f)
+        return f
+
+    def emission(self) -> list[tuple[Any, Any, str]]:
+        """(lanes, radiance, light-path letters) of each kind that emits here."""
+        out = []
+        for bsdf, mask, prm in self.parts:
+            if bsdf.emits:
+                value = bsdf.emission(prm, self.si)
+                if value is not None:
+                    out.append((mask, value, bsdf.emission_letters))
+        return out
+
+    def delta_lobes(self, throughput) -> list[Slot]:
+        """The lobe slots: per lane, the direction and ``throughput`` x the lobe's weight.
+
+        Slot i holds lobe i of each lane's kind; lanes whose kind has fewer
+        lobes get weight 0 there (and are dropped by the integrator).
+        """
+        slots: list[Slot] = []
+        for bsdf, mask, prm in self.parts:
+            if not bsdf.lobes:
+                continue
+            lobes = bsdf.delta_lobes(prm, self.si)
+            for i, ((d, w), lobe) in enumerate(zip(lobes, bsdf.lobes, strict=True)):
+                if i == len(slots):
+                    zero = dr.zeros(type(throughput), dr.width(throughput))
+                    slots.append(Slot(d, dr.select(mask, throughput * w, zero)))
+                else:
+                    s = slots[i]
+                    s.d = dr.select(mask, d, s.d)
+                    s.weight = dr.select(mask, throughput * w, s.weight)
+                s = slots[i]
+                s.letters[lobe.letter] = _or([s.letters.get(lobe.letter), mask], None)
+                s.kinds[lobe.kind] = _or([s.kinds.get(lobe.kind), mask], None)
+        return slots
+
+
+class SceneMaterials:
+    """Every material of a scene as per-kind tables, and the dispatch over kinds."""
+
+    def __init__(self, materials: list[MaterialModel]):
+        by_kind: dict[str, list] = {}
+        rows = []
+        for m in materials:
+            members = by_kind.setdefault(type_of(m), [])
+            rows.append((type_of(m), len(members)))
+            members.append(m)
+        order = [name for name in REGISTRY if name in by_kind]
+        #: one BSDF per kind present, in registry order
+        self.kinds = [REGISTRY[name].BSDF(by_kind[name]) for name in order]
+        # Material id len(materials) is "no material" (a pure emitter): no kind matches it.
+        kind = [order.index(name) for name, _ in rows] + [len(order)]
+        self.kind = jit.UInt32(np.asarray(kind, dtype=np.uint32))
+        self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
+        self.has_smooth = any(k.smooth for k in self.kinds)
+        self.has_delta = any(k.lobes for k in self.kinds)
+
+    def at(self, mid, si: ShadingPoint, valid) -> Closure:
+        """The materials of material ids ``mid`` at the hits ``si`` (lanes in ``valid``)."""
+        kind = dr.gather(jit.UInt32, self.kind, mid, valid)
+        row = dr.gather(jit.UInt32, self.row, mid, valid)
+        parts = []
+        for i, bsdf in enumerate(self.kinds):
+            mask = valid & (kind == i)
+            parts.append((bsdf, mask, bsdf.params(row, si, mask)))
+        return Closure(parts, si, valid)
