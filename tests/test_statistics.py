@@ -216,3 +216,20 @@ def test_false_alarms_and_power_on_many_seeds(name):
     for t in trials:
         assert not _biased(t, "image", 0.01)[0]["region_max_z"]["pass"]
     assert REGION_ALPHA == 1e-3
+
+
+def test_block_rule_counts_correlated_channels_at_their_true_noise():
+    # One path carries all three channels: for grey noise, the channel sum's standard
+    # deviation is 3 sigma, not sqrt(3) sigma. Blocks of pure noise must then exceed 3
+    # standard deviations as rarely as a normal does (0.27 %), not 8 % of the time.
+    from reference.compare import BLOCK_SIGMAS, block_metrics
+
+    rng = np.random.default_rng(3)
+    h, w, sigma = 256, 256, 0.004
+    ref = np.full((h, w, 3), 0.01, dtype=np.float32)
+    noise = rng.normal(0, sigma, (h, w, 1)).repeat(3, axis=-1)
+    test = (ref + noise).astype(np.float32)
+    var = np.full((h, w, 3), sigma ** 2)
+    frac = block_metrics(test, ref, var)["block_frac_over_5pct"]
+    assert BLOCK_SIGMAS == 3.0
+    assert frac < 0.01, frac
