@@ -174,7 +174,9 @@ def _check_lines(checks: dict) -> list[str]:
         rel = ">=" if k == "z_fraction_passed" else "<"
         pct = k in _PCT_CHECKS
         val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
-        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.2g}"
+        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
+        if k == "region_max_z":
+            val, lim = f"{ch['value']:.2f}", f"{ch['limit']:.2f}"
         lines.append(f"  {_CHECK_LABELS.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
                      f"{'pass' if ch['pass'] else 'FAIL'}")
         if k == "region_max_z" and ch.get("regions"):
@@ -195,6 +197,10 @@ def format_comparison(c) -> str:
     lines.append(f"  RMSE {m['rmse']:.3e}   mean rel. {m['mean_rel']:.2e}   "
                  f"99.9th pct. rel. {m['p999_rel']:.2e}   max rel. {m['max_rel']:.2e}   "
                  f"FLIP {flip}")
+    s = c.seconds
+    ratio = s.get("ratio_mitsuba_over_tracer")
+    lines.append(f"  seconds: tracer {s['tracer']:.3f}, Mitsuba {s['mitsuba']:.3f}"
+                 + (f" (Mitsuba / tracer = {ratio:.2f})" if ratio else ""))
     if c.second_opinion:
         so = c.second_opinion
         lines.append(f"second opinion: reference {so['reference']} (integrator "
@@ -202,10 +208,6 @@ def format_comparison(c) -> str:
                      f"{so['tracer_seeds']} seeds), test {so['test']}: "
                      f"{'pass' if so['passed'] else 'FAIL'}")
         lines += _check_lines(so["checks"])
-    s = c.seconds
-    ratio = s.get("ratio_mitsuba_over_tracer")
-    lines.append(f"  seconds: tracer {s['tracer']:.3f}, Mitsuba {s['mitsuba']:.3f}"
-                 + (f" (Mitsuba / tracer = {ratio:.2f})" if ratio else ""))
     if c.expected_deviation:
         e = c.expected_deviation
         lines.append(f"  expected deviation of the full render (tracer-only: "
@@ -228,7 +230,7 @@ def cmd_compare(args) -> int:
                                  progress=Progress(f"render {scene.name}"),
                                  second_opinion=False if args.no_second_opinion else None)
     print(format_comparison(result))
-    print(f"wrote {outdir}/tracer.exr, mitsuba.exr, diff.png, metrics.json")
+    print(f"wrote {outdir}/" + ", ".join(Path(f).name for f in result.files.values()))
     return EXIT_OK if result.passed else EXIT_FAIL
 
 

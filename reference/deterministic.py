@@ -84,6 +84,11 @@ SAMPLE_MAPS: dict[type, Callable] = {Rectangle: _same, Disk: _same, Triangle: _t
                                      Sphere: _sphere}
 
 
+def shares_light_samples(scene: Scene) -> bool:
+    """Whether every emitting shape of ``scene`` has a sample map (see SAMPLE_MAPS)."""
+    return all(type(s) in SAMPLE_MAPS for s in scene.shapes if s.emitter is not None)
+
+
 @dataclass
 class _Light:
     emitter: object
@@ -217,7 +222,10 @@ class DeterministicReference:
                 rays[depth - 1] += dr.width(sl)
                 nxt = self._level(r, b, px, sx, sl, depth, L)
                 if nxt is not None and depth < scene.film.max_depth:
-                    stack.append((depth + 1, nxt))
+                    # A level that outgrows the chunk (both lobes of every glass hit) is
+                    # split and followed depth-first, as in the tracer: bounded memory.
+                    for part in reversed(_split(nxt, CHUNK_SAMPLES, mi)):
+                        stack.append((depth + 1, part))
             px_mean = dr.block_sum(L, spp) * (1.0 / spp)
             image[first:first + count] = np.asarray(px_mean).T
             if progress is not None:
@@ -226,6 +234,21 @@ class DeterministicReference:
             rays.pop()
         return DeterministicResult(image.reshape(H, W, 3), time.perf_counter() - start, spp,
                                    rays)
+
+
+def _split(level, cap: int, mi) -> list:
+    """A level's rays (ray, weight, pixel, sample, slot) in parts of at most ``cap``."""
+    n = dr.width(level[-1])
+    if n <= cap:
+        return [level]
+    ray, *rest = level
+    parts = []
+    for a in range(0, n, cap):
+        idx = dr.arange(mi.UInt32, a, min(a + cap, n))
+        parts.append((mi.Ray3f(dr.gather(mi.Point3f, ray.o, idx),
+                               dr.gather(mi.Vector3f, ray.d, idx)),
+                      *(dr.gather(type(x), x, idx) for x in rest)))
+    return parts
 
 
 def render_deterministic(scene: Scene, seed: int = 0,

@@ -274,3 +274,26 @@ def test_reference_follows_as_many_rays_per_level_as_the_tracer():
     # Both sides drop the same zero-weight branches; a grazing ray may fall either way.
     assert all(abs(a - b) <= max(2, 1e-3 * a) for a, b in zip(ours, ref, strict=True))
     assert math.prod(ref) > 0
+
+
+def test_a_light_without_a_sample_map_is_judged_by_the_one_lobe_reference(monkeypatch):
+    # A future emitting shape whose warp the reference cannot match: the comparison
+    # falls back to the statistical verdict and says why, rather than failing.
+    import reference.deterministic as det
+
+    monkeypatch.setattr(det, "SAMPLE_MAPS", {k: v for k, v in SAMPLE_MAPS.items()
+                                             if k is not Disk})
+    result, _, _ = compare_scene(_emitter_scene(Disk).with_overrides(size=(32, 24)))
+    assert result.reference == "onelobe" and result.test == "z-test"
+    assert "no shared light samples" in result.reason and result.passed
+
+
+def test_levels_larger_than_a_chunk_are_split_without_changing_the_image(monkeypatch):
+    import reference.deterministic as det
+
+    scene = load_scene(SCENES / "whitted_mix.toml").with_overrides(size=(48, 32), spp=4)
+    whole = render_deterministic(scene)
+    monkeypatch.setattr(det, "CHUNK_SAMPLES", 1000)   # 250 pixels; levels split too
+    parts = render_deterministic(scene)
+    assert parts.rays_per_level == whole.rays_per_level
+    assert np.allclose(parts.image, whole.image, rtol=1e-6, atol=1e-9)
