@@ -88,7 +88,9 @@ it sees), and ``tests/test_statistics.py`` measures both on seeds.
    (the "rule of three", 3 / N, at 95 %). A sample's value is bounded by B,
    the brightest value of the reference image in that channel (a missed path
    ends at an emitter or a Lambertian surface, whose radiance does not depend
-   on the direction it is seen from, and specular weights are <= 1), so the
+   on the direction it is seen from, and the specular weights along a camera
+   path are <= 1: the (n_i / n_t)^2 > 1 of leaving glass follows its
+   reciprocal on entering), so the
    pixel's expectation lies within q B of the reference's value: such a
    pixel passes when |t - r| <= q B (plus the tracer's own noise). Alpha:
    alpha_pixel per pixel, as rule 1. Power: errors beyond q B (1.4 % of the
@@ -96,41 +98,40 @@ it sees), and ``tests/test_statistics.py`` measures both on seeds.
 3. 4 x 4 blocks (``block_median_rel`` < 1 %, ``block_frac_over_5pct`` < 2 %
    of blocks beyond 5 % and 3 sigma of the noise): a coarse look at the
    picture; not a statistical level of its own.
-4. Regions (``region_max_z``): the signed sum of the differences (channel sum
-   R + G + B) over each region, D_g = sum (t - r), divided by its standard
-   deviation, Z_g = D_g / sqrt(sum Var). Regions: every material (the
-   tracer's first-hit material at the pixel's centre, from
-   :func:`tracer.integrator.material_ids`), the background, 4 x 4 tiles of
-   the image and the whole image; regions with fewer than
-   ``REGION_MIN_PIXELS`` random pixels are not tested. Var is the spread of
-   the reference's passes (and of the tracer's seeds): the sample variance of
-   independent replicates is unbiased whatever the shape of the noise, per
-   pixel with only passes - 1 degrees of freedom but summed over hundreds of
-   independent pixels, and D_g sums thousands of independent samples, so Z_g
-   is standard normal under a correct tracer. The sums take only pixels
-   whose value varies on either side beyond rule 1's float32 floor; the
-   others (deterministic pixels, a light that is sampled but always
-   shadowed, a rare path no pass took, a sample on an edge that the two
-   sides round differently) are judged pixel by pixel by rules 1 and 2.
-   Leaving them out changes nothing where both sides agree on a fixed value
-   (t - r = 0); where a missed rare path makes t - r > 0 it shifts the sum by
-   well under one of those pixels' standard deviations each, and the check
-   on seeds shows none of it: the mean of Z_g^2 over disjoint tiles stays
-   within its chi-square interval (0.78 to 1.01 over 24 seeds on four glass
-   and area-lit scenes, ``docs/verdict_figures.py``; slightly below 1 where
-   rare paths make the noise skewed, for then a large D_g comes with a large
-   estimated variance: conservative). Every |Z_g| must stay below the Sidak level z_crit for
-   alpha = ``REGION_ALPHA`` = 1e-3 over the G regions tested (z_crit ~ 4.0 for
-   20-25 regions). Alpha: 1e-3 per scene. Power: a relative bias b over a region
-   is detected with probability >= 90 % when b |sum r| >= (z_crit + 1.28)
-   sqrt(sum Var); each region's smallest such b is reported
+4. Regions (``region_max_z``): the signed sum of the differences (the channel
+   sum R + G + B) over each region, D_g = sum (t - r), divided by its standard
+   deviation, Z_g = D_g / sqrt(sum Var). Regions: every material (the tracer's
+   first-hit material at the pixel's centre, from
+   :func:`tracer.integrator.material_ids`), the background, 4 x 4 tiles of the
+   image and the whole image; regions with fewer than ``REGION_MIN_PIXELS``
+   random pixels are not tested. Var is the spread of the reference's passes
+   (and of the tracer's seeds): the sample variance of independent replicates
+   is unbiased whatever the shape of the noise, per pixel with only passes - 1
+   degrees of freedom but summed over hundreds of independent pixels, and D_g
+   sums thousands of independent samples, so Z_g is standard normal under a
+   correct tracer. The sums take only pixels whose value varies on either side
+   beyond rule 1's float32 floor; the others (deterministic pixels, a light
+   that is sampled but always shadowed, a rare path no pass took, a sample on
+   an edge that the two sides round differently) are judged pixel by pixel by
+   rules 1 and 2. Leaving them out changes nothing where both sides agree on a
+   fixed value (t - r = 0); where a missed rare path makes t - r > 0 it shifts
+   the sum by well under one of those pixels' standard deviations each, and the
+   check on seeds shows none of it: the mean of Z_g^2 over disjoint tiles stays
+   within its chi-square interval (0.78 to 1.01 over 24 seeds on four glass and
+   area-lit scenes, ``docs/verdict_figures.py``; slightly below 1 where rare
+   paths make the noise skewed, for then a large D_g comes with a large
+   estimated variance: conservative). Every |Z_g| must stay below the Sidak
+   level z_crit for alpha = ``REGION_ALPHA`` = 1e-3 over the G regions tested
+   (z_crit ~ 4.0 for 20-25 regions). Alpha: 1e-3 per scene. Power: a relative
+   bias b over a region is detected with probability >= 90 % when b |sum r| >=
+   (z_crit + 1.28) sqrt(sum Var); each region's smallest such b is reported
    (``detectable_bias``): at 96 x 72 and 1024 samples, 0.06 % (area_lights'
    whole image) to 0.28 % (the glass of emitter_in_glass), and a 1 % bias over
    the glass or the image was caught in 96 of 96 trials (0 of 96 with the
-   variance 1024 times too large). A sum of z^2 (chi-square) would also see errors
-   of alternating sign, but squares lose the sign that makes a 1 % bias over
-   thousands of pixels visible, and with 15 degrees of freedom per pixel its
-   null distribution depends on the shape of each pixel's noise; the signed
+   variance 1024 times too large). A sum of z^2 (chi-square) would also see
+   errors of alternating sign, but squares lose the sign that makes a 1 % bias
+   over thousands of pixels visible, and with 15 degrees of freedom per pixel
+   its null distribution depends on the shape of each pixel's noise; the signed
    sums do not.
 
 A scene fails the z-test when rule 1 (with rule 2), 3 or 4 fails.
