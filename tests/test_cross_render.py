@@ -5,8 +5,9 @@ the deterministic reference, which follows both lobes of every mirror and
 glass and samples area lights at the tracer's own points, every scene must
 agree to float precision (median relative difference below 1e-5, 99.9 % of
 the pixels within 1e-3, means within 1e-4), except the paraboloid's, which
-Mitsuba sees tessellated; scenes with area lights must also pass the one-lobe
-reference's statistical verdict (the second opinion).
+Mitsuba sees tessellated; every scene where the one-lobe reference samples
+must also pass its statistical verdict (the second opinion of area-lit
+scenes), here at the report's quick size.
 """
 
 import json
@@ -40,7 +41,9 @@ def _direct_only(path: Path) -> bool:
 @pytest.mark.parametrize("path", BUILTIN, ids=[p.stem for p in BUILTIN])
 def test_builtin_scene_agrees_with_mitsuba(path, tmp_path):
     scene = load_scene(path)
-    result, tracer_img, ref_img = compare_scene(scene, tmp_path)
+    # The one-lobe second opinion of area-lit scenes is judged below at the report's
+    # quick size (test_one_lobe_reference_agrees_statistically).
+    result, tracer_img, ref_img = compare_scene(scene, tmp_path, second_opinion=False)
     assert tracer_img.shape == (scene.film.height, scene.film.width, 3)
     assert np.isfinite(tracer_img).all() and tracer_img.max() > 0
     failed = {k: v for k, v in result.checks.items() if not v["pass"]}
@@ -50,9 +53,7 @@ def test_builtin_scene_agrees_with_mitsuba(path, tmp_path):
     if result.test == "exact-strata":    # the accuracy target, area lights included
         assert result.metrics["median_rel"] < 1e-5
         assert result.metrics["frac_over_01pct"] < 1e-3
-    assert (result.second_opinion is not None) == scene.has_area_lights()
-    if result.second_opinion:
-        assert result.second_opinion["passed"], result.second_opinion["checks"]
+    assert result.second_opinion is None
     for f in ("tracer.exr", "mitsuba.exr", "diff.png", "metrics.json"):
         assert (tmp_path / f).stat().st_size > 0
     saved = json.loads((tmp_path / "metrics.json").read_text())
