@@ -158,30 +158,56 @@ def cmd_reference(args) -> int:
     return EXIT_OK
 
 
+_CHECK_LABELS = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
+                 "frac_over_01pct": "pixels beyond 0.1 %",
+                 "mean_rel_diff": "image means differ by",
+                 "z_fraction_passed": "z-test pixels passing",
+                 "block_median_rel": "4x4 blocks: median rel.",
+                 "block_frac_over_5pct": "4x4 blocks beyond 5 %",
+                 "region_max_z": "regions: largest |Z|"}
+_PCT_CHECKS = ("frac_over_5pct", "frac_over_01pct", "z_fraction_passed", "block_frac_over_5pct")
+
+
+def _check_lines(checks: dict) -> list[str]:
+    lines = [f"  {'check':<26}{'value':>12}  {'limit':>10}"]
+    for k, ch in checks.items():
+        rel = ">=" if k == "z_fraction_passed" else "<"
+        pct = k in _PCT_CHECKS
+        val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
+        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
+        if k == "region_max_z":
+            val, lim = f"{ch['value']:.2f}", f"{ch['limit']:.2f}"
+        lines.append(f"  {_CHECK_LABELS.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
+                     f"{'pass' if ch['pass'] else 'FAIL'}")
+        if k == "region_max_z" and ch.get("regions"):
+            seen = [g for g in ch["regions"] if g["detectable_bias"] <= 0.01]
+            worst = max(ch["regions"], key=lambda g: abs(g["z"]))
+            lines.append(f"    {len(ch['regions'])} regions tested (largest |Z| in "
+                         f"{worst['name']}); a 1 % bias is seen with 90 % power in "
+                         f"{len(seen)} of them")
+    return lines
+
+
 def format_comparison(c) -> str:
     m = c.metrics
     lines = [f"scene {c.scene}: {c.size[0]}x{c.size[1]}, {c.spp} spp, backend {c.backend}, "
-             f"reference integrator {c.integrator}, test {c.test}"]
-    lines.append(f"  {'check':<26}{'value':>12}  {'limit':>10}")
-    labels = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
-              "mean_rel_diff": "image means differ by",
-              "z_fraction_passed": "z-test pixels passing",
-              "block_median_rel": "4x4 blocks: median rel.",
-              "block_frac_over_5pct": "4x4 blocks beyond 5 %"}
-    for k, ch in c.checks.items():
-        rel = ">=" if k == "z_fraction_passed" else "<"
-        pct = k in ("frac_over_5pct", "z_fraction_passed", "block_frac_over_5pct")
-        val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
-        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
-        lines.append(f"  {labels.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
-                     f"{'pass' if ch['pass'] else 'FAIL'}")
+             f"reference {c.reference} (integrator {c.integrator}), test {c.test}"]
+    lines += _check_lines(c.checks)
     flip = "n/a" if m["flip"] is None else f"{m['flip']:.4f}"
     lines.append(f"  RMSE {m['rmse']:.3e}   mean rel. {m['mean_rel']:.2e}   "
-                 f"max rel. {m['max_rel']:.2e}   FLIP {flip}")
+                 f"99.9th pct. rel. {m['p999_rel']:.2e}   max rel. {m['max_rel']:.2e}   "
+                 f"FLIP {flip}")
     s = c.seconds
     ratio = s.get("ratio_mitsuba_over_tracer")
     lines.append(f"  seconds: tracer {s['tracer']:.3f}, Mitsuba {s['mitsuba']:.3f}"
                  + (f" (Mitsuba / tracer = {ratio:.2f})" if ratio else ""))
+    if c.second_opinion:
+        so = c.second_opinion
+        lines.append(f"second opinion: reference {so['reference']} (integrator "
+                     f"{so['integrator']}, {so['reference_passes']} passes; tracer mean of "
+                     f"{so['tracer_seeds']} seeds), test {so['test']}: "
+                     f"{'pass' if so['passed'] else 'FAIL'}")
+        lines += _check_lines(so["checks"])
     if c.expected_deviation:
         e = c.expected_deviation
         lines.append(f"  expected deviation of the full render (tracer-only: "
@@ -199,11 +225,27 @@ def cmd_compare(args) -> int:
     _backend(args)
     from reference.compare import compare_scene
 
-    result, _, _ = compare_scene(scene, outdir, args.integrator,
-                                 progress=Progress(f"render {scene.name}"))
+    reference = _reference_option(args)
+    result, _, _ = compare_scene(scene, outdir, reference,
+                                 progress=Progress(f"render {scene.name}"),
+                                 second_opinion=False if args.no_second_opinion else None)
     print(format_comparison(result))
-    print(f"wrote {outdir}/tracer.exr, mitsuba.exr, diff.png, metrics.json")
+    print(f"wrote {outdir}/" + ", ".join(Path(f).name for f in result.files.values()))
     return EXIT_OK if result.passed else EXIT_FAIL
+
+
+def _reference_option(args) -> str:
+    """``--reference``, or the reference that the older ``--integrator`` option names."""
+    from tracer.errors import UserError
+
+    legacy = {"whitted": "onelobe", "direct": "direct"}
+    if args.integrator is not None:
+        named = legacy[args.integrator]
+        if args.reference is not None and args.reference != named:
+            raise UserError(f"--integrator {args.integrator} means --reference {named}; "
+                            f"it contradicts --reference {args.reference}")
+        return named
+    return args.reference or "deterministic"
 
 
 def cmd_export(args) -> int:
@@ -275,7 +317,9 @@ def cmd_report(args) -> int:
     _backend(args)
     print(f"whitted report: {len(paths)} scene(s){' (quick)' if args.quick else ''} "
           f"+ Fresnel curves -> {out}/", flush=True)
-    report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel)
+    report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
+                          reference=args.reference,
+                          second_opinion=False if args.no_second_opinion else None)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
           + ("" if args.no_fresnel else
@@ -402,9 +446,12 @@ def build_parser() -> argparse.ArgumentParser:
                          description="Render SCENE on Mitsuba 3 after converting it to Mitsuba's "
                                      "plugins.")
     scene_opts(ref, "output image (.exr, .png or .ppm)")
-    ref.add_argument("--integrator", choices=("whitted", "direct", "path"), default="whitted",
-                     help="Mitsuba integrator: whitted (ours, every light once per sample; "
-                          "default), direct or path (Mitsuba's)")
+    ref.add_argument("--integrator", choices=("whitted", "direct", "path", "deterministic"),
+                     default="whitted",
+                     help="Mitsuba integrator: whitted (ours, one lobe per sample, every light "
+                          "once per sample; default), direct or path (Mitsuba's), or "
+                          "deterministic (the harness's loop over Mitsuba's plugins: both lobes, "
+                          "the tracer's light samples of --seed; what compare uses)")
     ref.set_defaults(func=cmd_reference)
 
     c = sub.add_parser("compare", help="render with both and compare",
@@ -413,9 +460,18 @@ def build_parser() -> argparse.ArgumentParser:
                                    "print the metrics, and exit 0 within the scene's tolerance, "
                                    "1 outside it.")
     scene_opts(c, "output folder (default: out/compare/SCENE_NAME)", output_required=False)
-    c.add_argument("--integrator", choices=("whitted", "direct"), default="whitted",
-                   help="reference integrator (default whitted; direct only for scenes "
-                        "without mirrors, glass or area lights)")
+    c.add_argument("--reference", choices=("deterministic", "onelobe", "direct"),
+                   default=None,
+                   help="Mitsuba's side: deterministic (default: both lobes of every mirror "
+                        "and glass, area lights at the tracer's light samples, judged at "
+                        "float precision), onelobe (the whitted integrator: one lobe per "
+                        "sample, judged by the statistical z-test), or direct (Mitsuba's, "
+                        "scenes without mirrors, glass or area lights)")
+    c.add_argument("--integrator", choices=("whitted", "direct"), default=None,
+                   help="older name of --reference: whitted = onelobe, direct = direct")
+    c.add_argument("--no-second-opinion", action="store_true",
+                   help="skip the one-lobe reference's z-test that the deterministic reference "
+                        "adds for scenes with area lights")
     c.set_defaults(func=cmd_compare)
 
     e = sub.add_parser("export", help="write the scene as Mitsuba 3 XML",
@@ -461,6 +517,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="smaller images (<= 96 px wide), <= 16 spp, fewer reference passes "
                          "and a coarser Fresnel table: minutes instead of tens of minutes")
     rp.add_argument("--no-fresnel", action="store_true", help="skip the Fresnel curves")
+    rp.add_argument("--reference", choices=("deterministic", "onelobe"), default="deterministic",
+                    help="Mitsuba's side of every scene (see whitted compare --help; default "
+                         "deterministic)")
+    rp.add_argument("--no-second-opinion", action="store_true",
+                    help="skip the one-lobe z-test beside the deterministic reference on "
+                         "scenes with area lights")
     rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     rp.set_defaults(func=cmd_report)

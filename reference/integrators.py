@@ -19,7 +19,17 @@ ray casts; only the loop is ours:
 
 With ``moments = true`` it also returns the per-sample second moment of each
 RGB channel as AOVs ``m2.R``, ``m2.G``, ``m2.B``, from which the harness gets
-the per-pixel variance for its z-test.
+the per-pixel variance for its z-test, and an AOV ``random``: 1 for a sample
+that drew a random number which could have changed its value (a lobe chosen
+where both had non-zero probability, or an area light sampled), else 0. Its
+pixel mean tells the harness which pixels are random at all, and over how
+many samples (see the zero-variance rule in :mod:`reference.compare`).
+
+This integrator is the harness's second, independent opinion: the default
+reference, :mod:`reference.deterministic`, follows both lobes and shares the
+tracer's light samples, so it carries no noise; this one samples as Mitsuba's
+own integrators do, so it also checks that the tracer's light samples are
+unbiased.
 
 Random numbers. The harness renders with Mitsuba's ``stratified`` sampler at
 strata centres (``jitter = false``) so that pixel positions are exactly the
@@ -54,7 +64,7 @@ class WhittedIntegrator(mi.SamplingIntegrator):
             raise ValueError("whitted: max_depth must be >= 1")
 
     def aov_names(self):
-        return ["m2.R", "m2.G", "m2.B"] if self.moments else []
+        return ["m2.R", "m2.G", "m2.B", "random"] if self.moments else []
 
     def _stream(self, sampler, ray):
         """A PCG32 stream per sample (see the module docstring)."""
@@ -75,7 +85,9 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         max_depth = self.max_depth
         rng = self._stream(sampler, ray)
 
-        def body(ray, L, beta, depth, active, valid, rng):
+        area = [not mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in emitters]
+
+        def body(ray, L, beta, depth, active, valid, rng, rand):
             si = scene.ray_intersect(ray, active)
             valid |= active & si.is_valid() & (depth == 0)
             # Emitted radiance of an area light hit on its front side.
@@ -86,7 +98,9 @@ class WhittedIntegrator(mi.SamplingIntegrator):
             bsdf = si.bsdf(ray)
             flags = bsdf.flags()
             smooth = active & mi.has_flag(flags, mi.BSDFFlags.Smooth)
-            for emitter in emitters:
+            for emitter, sampled in zip(emitters, area, strict=True):
+                if sampled:
+                    rand |= smooth
                 u = mi.Point2f(rng.next_float32(smooth), rng.next_float32(smooth))
                 ds, weight = emitter.sample_direction(si, u, smooth)
                 lit = smooth & (ds.pdf != 0) & (dr.max(weight) > 0)
@@ -101,18 +115,21 @@ class WhittedIntegrator(mi.SamplingIntegrator):
             u2 = mi.Point2f(rng.next_float32(delta), rng.next_float32(delta))
             bs, bsdf_weight = bsdf.sample(ctx, si, u1, u2, delta)
             beta = dr.select(delta, beta * bsdf_weight, beta)
+            # A lobe chosen with probability below 1: the other one was possible.
+            rand |= delta & (bs.pdf > 0) & (bs.pdf < 1)
             active = delta & (bs.pdf > 0) & (dr.max(beta) > 0)
             ray = dr.select(active, si.spawn_ray(si.to_world(bs.wo)), ray)
-            return ray, L, beta, depth, active, valid, rng
+            return ray, L, beta, depth, active, valid, rng, rand
 
         # The random stream is part of the loop state: each iteration draws new numbers.
         state = (mi.Ray3f(ray), mi.Spectrum(0), mi.Spectrum(1), mi.UInt32(0),
-                 mi.Bool(active), mi.Bool(False), rng)
-        ray, L, beta, depth, active, valid, rng = dr.while_loop(
+                 mi.Bool(active), mi.Bool(False), rng, mi.Bool(False))
+        ray, L, beta, depth, active, valid, rng, rand = dr.while_loop(
             state, lambda *s: s[4], body, labels=("ray", "L", "beta", "depth", "active",
-                                                  "valid", "rng"),
+                                                  "valid", "rng", "rand"),
             label="whitted")
-        aovs = [L[0] * L[0], L[1] * L[1], L[2] * L[2]] if self.moments else []
+        aovs = ([L[0] * L[0], L[1] * L[1], L[2] * L[2], dr.select(rand, 1.0, 0.0)]
+                if self.moments else [])
         return L, valid, aovs
 
     def to_string(self):

@@ -11,7 +11,7 @@ from reference import mitsuba
 from reference.mitsuba_scene import load
 from tracer.scene import Scene
 
-INTEGRATORS = ("whitted", "direct", "path")
+INTEGRATORS = ("whitted", "direct", "path", "deterministic")
 
 
 @dataclass
@@ -24,6 +24,12 @@ class ReferenceResult:
     variance: np.ndarray | None = None  # H x W x 3, variance of the pixel mean
     passes: int = 1
     seconds_total: float = 0.0
+    #: H x W, variance of the pooled pixel mean of the channel sum R + G + B, from the
+    #: spread of the passes' means (unbiased for stratified samples; ``passes`` - 1
+    #: degrees of freedom); None with a single pass
+    pass_variance: np.ndarray | None = None
+    #: H x W, the fraction of samples that drew a random number that could change them
+    random_fraction: np.ndarray | None = None
 
 
 def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
@@ -42,8 +48,23 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     ``passes x spp`` samples per pixel. A single pass of 64 samples misses the
     Fresnel paths whose probability is below about 1/64, and then
     underestimates the variance of exactly those pixels; pooled passes see
-    paths 16 times rarer at 16 passes.
+    paths 16 times rarer at 16 passes. The passes are independent replicates
+    of one stratified estimator, so the spread of their means also gives an
+    unbiased variance of the pooled mean (``pass_variance``), which the
+    per-sample second moment overestimates wherever radiance varies across a
+    pixel.
+
+    ``integrator = "deterministic"`` renders :mod:`reference.deterministic`
+    instead (one pass; ``seed`` picks the tracer's light samples).
     """
+    if integrator == "deterministic":
+        from reference.deterministic import DeterministicReference
+
+        ref = DeterministicReference(scene, seed)
+        first = ref.render()
+        warm = ref.render()  # kernels compiled: timed as the tracer is
+        return ReferenceResult(first.image, warm.seconds, first.spp, integrator, passes=1,
+                               seconds_total=first.seconds + warm.seconds)
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown reference integrator {integrator!r}")
     mi = mitsuba()
@@ -52,7 +73,8 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     spp = scene.film.strata ** 2
     total = 0.0
     warm = []
-    mean = m2 = None
+    mean = m2 = rand = None
+    pass_sum = pass_sq = 0.0
     integ = ms.integrator()
     for k in range(passes):
         if hasattr(integ, "pass_seed"):  # our integrator's own random stream
@@ -65,16 +87,24 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
             warm.append(elapsed)
         img = out[..., :3]
         mean = img / passes if mean is None else mean + img / passes
+        total_c = img.sum(-1)
+        pass_sum = pass_sum + total_c
+        pass_sq = pass_sq + total_c ** 2
         if with_moments:
-            m2 = out[..., -3:] / passes if m2 is None else m2 + out[..., -3:] / passes
+            m2 = out[..., 3:6] / passes if m2 is None else m2 + out[..., 3:6] / passes
+            rand = out[..., 6] / passes if rand is None else rand + out[..., 6] / passes
     if not warm:  # one pass: time a second, warm one (its image is not used)
         if hasattr(integ, "pass_seed"):
             integ.pass_seed = seed + 1
         start = time.perf_counter()
         np.asarray(mi.render(ms, seed=seed + 1, spp=spp))
         warm.append(time.perf_counter() - start)
-    variance = None
+    variance = pass_variance = None
     if with_moments:
         variance = (np.maximum(m2 - mean ** 2, 0) / (spp * passes)).astype(np.float32)
+    if passes > 1:
+        spread = np.maximum(pass_sq - pass_sum ** 2 / passes, 0) / (passes - 1)
+        pass_variance = spread / passes
     return ReferenceResult(mean.astype(np.float32), float(np.median(warm)), spp, integrator,
-                           variance, passes, total)
+                           variance, passes, total, pass_variance,
+                           None if rand is None else rand.astype(np.float32))

@@ -80,6 +80,7 @@ def test_size_spp_and_depth_options_override_the_scene(tmp_path):
     (["render", "x.toml", "-o", "y.exr", "--spp", "0"], "positive integer"),
     (["render", "x.toml"], "required"),
     (["compare", "x.toml", "--integrator", "bogus"], "invalid choice"),
+    (["compare", "x.toml", "--reference", "bogus"], "invalid choice"),
 ])
 def test_bad_options_exit_2(args, words):
     r = run_cli(*args)
@@ -97,7 +98,32 @@ def test_compare_writes_outputs_and_exits_0_within_tolerance(tmp_path):
         assert key in m["metrics"]
     assert set(m["seconds"]) >= {"tracer", "mitsuba"}
     assert m["test"] == "exact-strata" and m["passed"] is True
+    assert m["reference"] == "deterministic" and m["second_opinion"] is None
     assert (out / "diff.png").stat().st_size > 0
+
+
+def test_compare_names_its_reference_and_keeps_the_older_integrator_option(tmp_path):
+    from reference import cli
+
+    scene = write_scene(tmp_path, MINIMAL)
+    for args, reference in ((["--integrator", "whitted"], "onelobe"),
+                            (["--reference", "onelobe"], "onelobe"),
+                            (["--integrator", "direct"], "direct")):
+        out = tmp_path / reference / args[0]
+        assert cli.main(["compare", str(scene), "-o", str(out), "--size", "16x12",
+                         "--spp", "4", *args]) == 0
+        m = json.loads((out / "metrics.json").read_text())
+        assert m["reference"] == reference
+    r = run_cli("compare", scene, "--integrator", "whitted", "--reference", "deterministic")
+    assert r.returncode == 2 and "contradicts" in r.stderr
+
+
+def test_reference_command_renders_the_deterministic_reference(tmp_path):
+    scene = write_scene(tmp_path, MINIMAL)
+    r = run_cli("reference", scene, "-o", tmp_path / "d.exr", "--integrator", "deterministic",
+                "--size", "16x12", "--spp", "4")
+    assert r.returncode == 0, r.stderr
+    assert read_exr(tmp_path / "d.exr").max() > 0
 
 
 def test_compare_exits_1_when_the_tracer_is_wrong(tmp_path, monkeypatch, capsys):

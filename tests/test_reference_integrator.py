@@ -40,3 +40,35 @@ def test_reference_moments_give_the_variance_of_the_pixel_mean():
     r = render_reference(scene, moments=True, passes=2)
     assert r.variance.shape == r.image.shape and (r.variance >= 0).all()
     assert r.variance.max() > 0 and r.passes == 2
+
+
+def test_random_aov_marks_the_pixels_where_the_reference_draws_lobes():
+    # Through the glass a sample's lobe is drawn at random; on the floor and the panels,
+    # lit by a point and a directional light, nothing is.
+    from tracer.integrator import material_ids
+
+    scene = load_scene(SCENES / "glass_sphere.toml").with_overrides(size=(40, 30), spp=16)
+    r = render_reference(scene, moments=True, passes=2)
+    ids = material_ids(scene)
+    glass = ids == list(scene.materials).index("glass")
+    assert r.random_fraction.shape == ids.shape
+    assert np.all(r.random_fraction[glass] > 0)
+    far = ~glass
+    far[1:] &= ~glass[:-1]
+    far[:-1] &= ~glass[1:]
+    far[:, 1:] &= ~glass[:, :-1]
+    far[:, :-1] &= ~glass[:, 1:]  # pixels whose neighbours show no glass either
+    assert np.all(r.random_fraction[far & (ids >= 0)] == 0)
+
+
+def test_pass_variance_is_the_spread_of_independent_passes():
+    # Var(pooled mean) = s^2 / P from P passes; it does not count the variation of
+    # radiance across a pixel's strata, which the per-sample moment does.
+    scene = load_scene(SCENES / "glass_sphere.toml").with_overrides(size=(40, 30), spp=16)
+    r = render_reference(scene, moments=True, passes=4)
+    passes = [render_reference(scene, seed=k).image.sum(-1).astype(np.float64)
+              for k in range(4)]
+    expected = np.var(passes, axis=0, ddof=1) / 4
+    assert np.allclose(r.pass_variance, expected, rtol=1e-3, atol=1e-12)
+    moment = np.sqrt(r.variance.astype(np.float64)).sum(-1) ** 2
+    assert np.median(moment[r.pass_variance > 0] / r.pass_variance[r.pass_variance > 0]) > 1

@@ -49,7 +49,7 @@ from tracer.emitters import area, scene_emitters
 from tracer.geometry import Geometry, Hit, spawn_offset
 from tracer.materials.base import ShadingPoint
 from tracer.materials.dispatch import SceneMaterials
-from tracer.sampling import pixel_samples, stratified_2d
+from tracer.sampling import light_sample, pixel_samples
 from tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
@@ -209,8 +209,8 @@ class Integrator:
                 for light in self.emitters:
                     u = None
                     if not light.delta:
-                        u = stratified_2d(b.pixel, b.s, scene.film.strata,
-                                          (self.seed * 64 + depth) * 4096 + light.index)
+                        u = light_sample(b.pixel, b.s, scene.film.strata, self.seed, depth,
+                                         light.index)
                     wi, dist, e = light.sample(p, p_front, u)
                     tmax = dist * (1 - SHADOW_EPSILON)
                     cos = lights.lambert_cosine(nl, wi)
@@ -325,6 +325,25 @@ class Integrator:
         return RenderResult(image.reshape(H, W, 3), spp, seconds, rays,
                             shadow[:len(rays)] if rays else [], significant[:len(rays)],
                             variance)
+
+
+def material_ids(scene: Scene) -> np.ndarray:
+    """H x W: the material seen through each pixel's centre, for per-material statistics.
+
+    The value is the material's position in ``scene.materials``, ``len(materials)``
+    for an emitter without a material, and -1 where the ray misses everything.
+    """
+    backend.use()
+    geo = Geometry(scene)
+    W, H = scene.film.width, scene.film.height
+    idx = dr.arange(jit.UInt32, W * H)
+    fx = jit.Float(idx % W) + 0.5
+    fy = jit.Float(idx // W) + 0.5
+    o, d, tmax = generate_rays(scene.camera, W, H, fx, fy)
+    hit = geo.closest_hit(o, d, tmax)
+    mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, hit.valid)
+    ids = np.where(hit.valid.numpy(), mid.numpy().astype(np.int64), -1)
+    return ids.reshape(H, W)
 
 
 def render(scene: Scene, progress: Callable[[int, int], None] | None = None,

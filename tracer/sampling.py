@@ -9,6 +9,10 @@ Random numbers (area-light sampling only) come from a stateless hash of
 (sample index, dimension), so every sample and every dimension draws
 independent numbers without carried state: the PCG hash of Jarzynski and
 Olano, "Hash Functions for GPU Rendering", JCGT 9(3), 2020.
+
+:func:`light_sample` names the one stream of light samples: the tracer draws
+from it, and the harness's deterministic reference on Mitsuba reads the very
+same numbers, so that both sides sample every area light at the same points.
 """
 
 import drjit as dr
@@ -67,3 +71,16 @@ def stratified_2d(pixel, s, n: int, dimension: int):
     h2 = pcg_hash(h1 + 0x632BE5AB)
     inv = 1.0 / n
     return jit.Array2f((jit.Float(cx) + uniform(h1)) * inv, (jit.Float(cy) + uniform(h2)) * inv)
+
+
+def light_sample(pixel, s, n: int, seed: int, depth: int, light: int):
+    """The 2D sample of area light ``light`` for sample ``s`` of ``pixel`` at level ``depth``.
+
+    One dimension of :func:`stratified_2d` per (seed, recursion level, light):
+    every level and every light draws independent, stratified points, and a
+    render with another ``seed`` draws another set. Levels count from 1 (camera
+    rays); lights are numbered in scene order among the emitting shapes.
+    """
+    # Opaque: every level and light reuses one compiled kernel.
+    dimension = dr.opaque(jit.UInt32, (seed * 64 + depth) * 4096 + light)
+    return stratified_2d(pixel, s, n, dimension)
