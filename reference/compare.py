@@ -298,13 +298,14 @@ def ztest_passes(spp: int) -> int:
 TRACER_SEEDS = 16
 
 
-def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndarray]:
+def tracer_pooled(scene, seeds: int = TRACER_SEEDS,
+                  first_seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Mean of ``seeds`` tracer renders and the variance of that mean.
 
     Where the tracer samples area lights its image is random. The comparison
     then tests its expectation, estimated by the mean of renders with seeds
-    0..seeds-1 (the same strata, independent light samples: as one render
-    with seeds x spp samples), and the variance of that mean comes from the
+    first_seed + 0..seeds-1 (the same strata, independent light samples: as
+    one render with seeds x spp samples), and the variance of that mean comes from the
     per-sample second moment pooled over all of them, (E[x^2] - E[x]^2) /
     (seeds x spp). One render's spp samples alone give too noisy a variance
     for a Sidak-corrected test (measured: 99.65 % of pixels passing on the
@@ -314,8 +315,10 @@ def tracer_pooled(scene, seeds: int = TRACER_SEEDS) -> tuple[np.ndarray, np.ndar
 
     m1 = m2 = 0.0
     spp = scene.film.strata ** 2
+    from tracer.sampling import seed32
+
     for k in range(seeds):
-        r = Integrator(scene, seed=k).render(moments=True)
+        r = Integrator(scene, seed=(seed32(first_seed) + k) & 0xFFFFFFFF).render(moments=True)
         mean = r.image.astype(np.float64)
         m1 = m1 + mean / seeds
         m2 = m2 + (r.variance.astype(np.float64) * spp + mean ** 2) / seeds
@@ -347,7 +350,7 @@ def comparable(scene):
 
 
 def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "whitted",
-                  progress=None, passes: int | None = None
+                  progress=None, passes: int | None = None, seed: int = 0
                   ) -> tuple[Comparison, np.ndarray, np.ndarray]:
     """Render ``scene`` with the tracer and with Mitsuba, compare, and write the outputs.
 
@@ -356,7 +359,8 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     that declares tracer-only parts is judged with those parts replaced by
     Mitsuba's equivalent (:func:`comparable`); the full render's difference
     from Mitsuba is reported as the expected deviation (``deviation.png``), and
-    ``tracer.exr`` is the full render.
+    ``tracer.exr`` is the full render. ``seed`` seeds both sides' random numbers
+    (the tracer's area-light samples, the reference's lobe and light choices).
     """
     from reference.render import render_reference
     from tracer import backend
@@ -369,18 +373,18 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     needs_var = test_name == "z-test"
     # The tracer samples only area lights; elsewhere it is deterministic.
     tracer_random = needs_var and scene.has_area_lights()
-    integ = Integrator(scene)
+    integ = Integrator(scene, seed=seed)
     integ.render()  # warm-up: compiles the kernels, so that both sides are timed warm
     tr = integ.render(progress)
     # The median of three warm renders, as Mitsuba's time is the median of warm passes.
     tr.seconds = float(np.median([tr.seconds] + [integ.render().seconds for _ in range(2)]))
     if passes is None:
         passes = ztest_passes(scene.film.strata ** 2) if needs_var else 1
-    ref = render_reference(scene, integrator, moments=needs_var and integrator == "whitted",
-                           passes=passes)
+    ref = render_reference(scene, integrator, seed=seed,
+                           moments=needs_var and integrator == "whitted", passes=passes)
     tracer_var = None
     if tracer_random:
-        tr.image, tracer_var = tracer_pooled(scene)
+        tr.image, tracer_var = tracer_pooled(scene, first_seed=seed)
     metrics = image_metrics(tr.image, ref.image)
     ref_var = ref.variance
     if needs_var and ref_var is None:
@@ -390,7 +394,7 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
     reason = verdict.reason
     full_image, deviation = tr.image, None
     if scene is not full_scene:
-        full_image = Integrator(full_scene).render().image
+        full_image = Integrator(full_scene, seed=seed).render().image
         deviation = asdict(image_metrics(full_image, ref.image))
         reason += ("; tracer-only parts (" + ", ".join(full_scene.tracer_only) +
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
@@ -414,6 +418,12 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
         description=full_scene.description, tracer_only=list(full_scene.tracer_only),
         expected_deviation=deviation)
     if outdir is not None:
+        from tracer.errors import UserError
+
+        for side, img in (("the tracer's", full_image), ("Mitsuba's", ref.image)):
+            if not np.isfinite(img).all():
+                raise UserError(f"{side} render overflowed float32 (light too strong: scale "
+                                "intensities and radiances down); nothing was written")
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         write_exr(out / "tracer.exr", full_image)
@@ -427,5 +437,21 @@ def compare_scene(scene, outdir: str | Path | None = None, integrator: str = "wh
                      f"{scene.name}: expected deviation ({', '.join(full_scene.tracer_only)})")
             names.append("deviation.png")
         result.files = {k: str(out / k) for k in names}
-        (out / "metrics.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
+        write_json(out / "metrics.json", result.to_json())
     return result, full_image, ref.image
+
+
+def _finite(v):
+    """The value with every NaN or infinite float replaced by None (JSON's null)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
+
+
+def write_json(path: str | Path, data) -> None:
+    """Write strict JSON (RFC 8259 has no NaN or Infinity): undefined numbers become null."""
+    Path(path).write_text(json.dumps(_finite(data), indent=2, allow_nan=False) + "\n")

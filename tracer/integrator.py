@@ -49,7 +49,7 @@ from tracer.geometry import (
     Hit,
     spawn_offset,
 )
-from tracer.sampling import pixel_samples, stratified_2d
+from tracer.sampling import mix32, pixel_samples, seed32, stratified_2d
 from tracer.scene import (
     Checkerboard,
     Dielectric,
@@ -304,8 +304,12 @@ class Integrator:
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
                  lpe: str | None = None, min_weight: float = 0.0):
         backend.use()
+        from tracer.limits import check_render
+
+        check_render(scene, moments=False)
         self.scene = scene
-        self.seed = seed
+        #: any integer; the streams use its 32-bit form (tracer.sampling.seed32)
+        self.seed = seed32(seed)
         #: Branches whose weight is at most this are dropped. 0 (exact Whitted) drops only
         #: zero-weight branches; a positive value is a biased speed-up.
         self.min_weight = float(min_weight)
@@ -374,7 +378,7 @@ class Integrator:
                     contrib += dr.select(lit & is_phong, b.weight * amb, 0)
             sources = [(light, None) for light in self.delta_lights]
             sources += [(light, stratified_2d(b.pixel, b.s, scene.film.strata,
-                                              (self.seed * 64 + depth) * 4096 + light.index))
+                                              mix32(self.seed, depth, light.index)))
                         for light in self.area_lights]
             for light, u in sources:
                 if u is None:

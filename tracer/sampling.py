@@ -11,9 +11,41 @@ independent numbers without carried state: the PCG hash of Jarzynski and
 Olano, "Hash Functions for GPU Rendering", JCGT 9(3), 2020.
 """
 
+import hashlib
+
 import drjit as dr
 
 from tracer.backend import jit
+
+
+def seed32(seed: int) -> int:
+    """Any integer seed as a 32-bit one: 0 .. 2^32 - 1 as they are, others hashed.
+
+    Seeds beyond 32 bits (negative ones, 2^40, ...) are hashed (BLAKE2b of
+    their decimal digits, the first 4 bytes) rather than wrapped, so that
+    2^32 + 7 draws other numbers than 7.
+    """
+    seed = int(seed)
+    if 0 <= seed < 1 << 32:
+        return seed
+    digest = hashlib.blake2b(str(seed).encode(), digest_size=4, person=b"whitted-seed")
+    return int.from_bytes(digest.digest(), "little")
+
+
+def mix32(*values: int) -> int:
+    """A 32-bit hash of a few non-negative integers (each < 2^32), on the CPU.
+
+    Used to derive one 32-bit dimension key from (seed, level, light) without
+    the collisions of packing them into bit fields; the same PCG permutation
+    as :func:`pcg_hash`, applied after each value is added.
+    """
+    h = 0x9E3779B9
+    for v in values:
+        h = (h ^ (int(v) & 0xFFFFFFFF)) & 0xFFFFFFFF
+        state = (h * 747796405 + 2891336453) & 0xFFFFFFFF
+        word = (((state >> ((state >> 28) + 4)) ^ state) * 277803737) & 0xFFFFFFFF
+        h = (word >> 22) ^ word
+    return h
 
 
 def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
