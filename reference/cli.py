@@ -101,8 +101,9 @@ def shown(path) -> str:
 def _note_spp(scene) -> None:
     n = scene.film.strata
     if n * n != scene.film.spp:
-        print(f"whitted: note: spp {scene.film.spp} is not a square; using {n * n} "
-              f"({n}x{n} strata), as Mitsuba's stratified sampler does", file=sys.stderr)
+        # On stdout: stderr holds nothing but the one line of an error.
+        print(f"note: spp {scene.film.spp} is not a square; using {n * n} "
+              f"({n}x{n} strata), as Mitsuba's stratified sampler does", flush=True)
 
 
 class Progress:

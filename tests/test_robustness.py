@@ -162,8 +162,8 @@ def test_fresnel_tables_beyond_the_sample_limit_are_refused(tmp_path):
     ("position = [0, 3, 3]", "position = [0, 3, 1e39]"),
     ("center = [0, 0, 0]", "center = [1e39, 0, 0]"),
     ('material = "white"', 'material = "white"\nto_world = [ { translate = [0, 1e39, 0] } ]'),
-    ('material = "white"', 'material = "white"\nto_world = [ { rotate = '
-                           '{ axis = [1e-170, 0, 0], angle = 30 } } ]'),
+    ('type = "sphere"\ncenter = [0, 0, 0]\nradius = 1',
+     'type = "rectangle"\nto_world = [ { rotate = { axis = [1e-170, 0, 0], angle = 30 } } ]'),
     ('material = "white"', 'material = "white"\nto_world = [ { scale = 1e-30 } ]'),
     ('material = "white"', 'material = "white"\nto_world = [ { scale = [1, 1, 1e-12] } ]'),
     ("radius = 1", "radius = 1e-200"),
@@ -265,11 +265,15 @@ def test_a_long_name_whose_temporary_name_would_be_too_long_is_written(tmp_path)
 
 def test_a_name_that_is_not_utf8_is_written_and_printed_escaped(tmp_path):
     scene = write_scene(tmp_path, MINIMAL)
-    out = os.path.join(os.fsencode(tmp_path), b"\xff\xfe.png")
+    folder = os.path.join(os.fsencode(tmp_path), b"\xfe")
+    os.mkdir(folder)
+    out = os.path.join(folder, b"\xff.exr")
     code = ("import sys\nfrom reference.cli import main\n"
             f"sys.exit(main(['render', {str(scene)!r}, '-o', "
             f"__import__('os').fsdecode({out!r})]))\n")
-    r = subprocess.run([sys.executable, "-c", code], capture_output=True, cwd=ROOT)
+    # Outside the C locale, where Python's stdout is strict UTF-8 and would refuse to print it.
+    env = dict(os.environ, LC_ALL="C.UTF-8", PYTHONUTF8="0", PYTHONIOENCODING="")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, cwd=ROOT, env=env)
     assert r.returncode == 0, r.stderr
     assert os.path.exists(out) and b"Traceback" not in r.stderr
 

@@ -17,6 +17,7 @@ A job that writes many files over a long time writes them into a
 
 from __future__ import annotations
 
+import io
 import os
 import shutil
 import stat
@@ -220,8 +221,11 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
 
     def write(tmp):
+        # Through memory: OpenEXR takes only file names it can encode as UTF-8.
+        buf = io.BytesIO()
         with OpenEXR.File(header, {"RGB": data}) as f:
-            f.write(tmp)
+            f.write(buf)
+        Path(tmp).write_bytes(buf.getvalue())
 
     _atomic_write(Path(path), write)
 
@@ -229,7 +233,7 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
 def read_exr(path: str | Path) -> np.ndarray:
     import OpenEXR
 
-    with OpenEXR.File(str(path)) as f:
+    with OpenEXR.File(io.BytesIO(Path(path).read_bytes())) as f:
         ch = f.channels()
         if "RGB" in ch:
             return np.asarray(ch["RGB"].pixels, dtype=np.float32)
