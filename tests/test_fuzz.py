@@ -220,9 +220,10 @@ def lpe_contract(expr: str) -> None:
     finally:
         assert time.perf_counter() - t0 < 5
     # The automaton accepts exactly the paths Python's regular expressions match, where
-    # their syntax agrees (Python reads *+, ++ and ?+ as possessive quantifiers).
+    # their syntax agrees: Python reads two postfix operators in a row (*+, +?, ??, ...)
+    # as possessive or lazy quantifiers, the expressions as one applied after the other.
     text = expr.replace(" ", "")
-    if any(op + "+" in text for op in "*+?"):
+    if re.search(r"[*+?]{2}", text):
         return
     try:
         pattern = re.compile(text)
