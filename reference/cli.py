@@ -617,12 +617,34 @@ def _silence_stdout() -> None:
         pass
 
 
-def _stdout_fails() -> bool:
-    try:
-        sys.stdout.flush()
-        return False
-    except OSError:
-        return True
+class StdoutError(Exception):
+    """Standard output cannot be written (a full device, a closed terminal)."""
+
+
+class _Stdout:
+    """sys.stdout, with its OS errors told apart from those of output files."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text):
+        try:
+            return self.stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise StdoutError(e.strerror or str(e)) from None
+
+    def flush(self):
+        try:
+            self.stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise StdoutError(e.strerror or str(e)) from None
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -637,6 +659,8 @@ def main(argv: list[str] | None = None) -> int:
         print(f"whitted: error: {one_line(message)}", file=sys.stderr)
         return EXIT_USAGE
 
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
     try:
         parser = build_parser()
         try:
@@ -658,16 +682,19 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `whitted scenes | head`: the reader has all it wants
         _silence_stdout()
         return EXIT_OK
+    except StdoutError as e:
+        sys.stdout = stdout
+        _silence_stdout()
+        return fail(f"cannot write to standard output: {e}")
     except OSError as e:
-        if getattr(e, "filename", None) is None and _stdout_fails():
-            _silence_stdout()
-            return fail(f"cannot write to standard output: {e.strerror or e}")
         where = f"{e.filename}: " if getattr(e, "filename", None) else ""
         return fail(f"{where}{e.strerror or e}")
     except RecursionError:
         return fail("input nested too deeply to process")
     except MemoryError:
         return fail("out of memory (lower the limits: WHITTED_MAX_MEMORY)")
+    finally:
+        sys.stdout = stdout
 
 
 def entrypoint() -> None:

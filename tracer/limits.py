@@ -67,7 +67,7 @@ class Limit:
 
 
 MAX_SAMPLES = Limit("WHITTED_MAX_SAMPLES", (1 << 32) - 1, "samples")
-MAX_MEMORY = Limit("WHITTED_MAX_MEMORY", _physical_memory() // 2, "memory")
+MAX_MEMORY = Limit("WHITTED_MAX_MEMORY", _physical_memory() // 2, "")
 MAX_DEPTH = Limit("WHITTED_MAX_DEPTH", 1000, "max_depth")
 MAX_PRIMITIVES = Limit("WHITTED_MAX_PRIMITIVES", 1 << 31, "primitives")
 MAX_SCENE_BYTES = Limit("WHITTED_MAX_SCENE_BYTES", 64 << 20, "scene file size")
@@ -96,7 +96,8 @@ def _gib(n: float) -> str:
 def refuse(limit: Limit, needed: str, value_text: str | None = None) -> None:
     """Raise the one-line refusal: what is needed, the limit, how to change it."""
     lim = value_text or f"{limit.value():,}"
-    raise UserError(f"{needed}, beyond the limit of {lim} {limit.what} "
+    what = f" {limit.what}" if limit.what else ""
+    raise UserError(f"{needed}, beyond the limit of {lim}{what} "
                     f"(set {limit.variable} to change it)")
 
 
