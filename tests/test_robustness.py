@@ -503,6 +503,36 @@ def test_instances_behind_the_hierarchy_render_as_instances_one_by_one(jit):
     assert tree.max() > 0 and np.array_equal(tree, flat)
 
 
+def test_a_hierarchy_of_mesh_instances_renders_as_the_instances_one_by_one(jit):
+    """A group with a mesh (its own BVH, traversed inside the instances' one) and glass."""
+    import tomllib
+
+    from tracer import geometry
+    from tracer.integrator import Integrator
+    from tracer.scene import parse_scene
+
+    text = ("[film]\nwidth = 32\nheight = 24\nspp = 4\nmax_depth = 3\n"
+            "[camera]\norigin = [0, 6, 14]\ntarget = [0, 0, 0]\n"
+            "[materials.m]\ntype = 'diffuse'\n[materials.glass]\ntype = 'dielectric'\n"
+            "[[lights]]\ntype = 'point'\nposition = [0, 8, 6]\nintensity = 80\n"
+            f"[[groups.k.shapes]]\ntype = 'mesh'\nfile = '{ROOT}/scenes/meshes/icosahedron.obj'\n"
+            "material = 'm'\n[[groups.k.shapes]]\ntype = 'sphere'\nradius = 0.4\n"
+            "center = [0, 1.5, 0]\nmaterial = 'glass'\n")
+    for i in range(12):
+        text += (f"[[shapes]]\ntype = 'instance'\ngroup = 'k'\nto_world = [{{ rotate = "
+                 f"{{ axis = [0, 1, 0], angle = {30 * i} }} }}, {{ translate = "
+                 f"[{(i % 4 - 1.5) * 3}, 0, {(i // 4 - 1) * 3}] }}]\n")
+    scene = parse_scene(tomllib.loads(text), str(ROOT / "scenes" / "x.toml"))
+    tree = Integrator(scene).render().image
+    old = geometry.INSTANCE_SET_MIN
+    geometry.INSTANCE_SET_MIN = 10**9
+    try:
+        flat = Integrator(scene).render().image
+    finally:
+        geometry.INSTANCE_SET_MIN = old
+    assert tree.max() > 0 and np.array_equal(tree, flat)
+
+
 def test_many_instances_convert_to_mitsuba(mi):
     from reference.mitsuba_scene import load
 
