@@ -2,13 +2,17 @@
 
 Every subcommand is a thin layer over a Python function; exit status 0 on
 success (for ``compare``: within the scene's tolerance), 1 when a comparison
-fails, 2 on bad input (scene, options, output path, missing libLLVM).
-``whitted render`` never imports Mitsuba.
+fails, 2 on bad input (scene, options, output path, missing libLLVM, a job
+beyond the limits of tracer/limits.py) or when the operating system refuses a
+file or standard output, always with one line on stderr, never a traceback.
+Bad input is refused before any rendering; a job that fails later writes
+nothing. ``whitted render`` never imports Mitsuba.
 """
 
 from __future__ import annotations
 
 import argparse
+import io
 import os
 import sys
 import time
@@ -47,10 +51,13 @@ def _positive(text: str) -> int:
 def resolve_scene(name: str) -> Path:
     """A scene path, or a built-in scene's name (``sphere_point``: scenes/sphere_point.toml)."""
     p = Path(name)
-    if p.exists() or p.suffix == ".toml" or os.sep in name:
+    try:
+        if p.exists() or p.suffix == ".toml" or os.sep in name:
+            return p
+        builtin = SCENES_DIR / f"{name}.toml"
+        return builtin if builtin.exists() else p
+    except (OSError, ValueError):  # a name too long, or with a NUL: load_scene says why
         return p
-    builtin = SCENES_DIR / f"{name}.toml"
-    return builtin if builtin.exists() else p
 
 
 def builtin_scenes() -> list[Path]:
@@ -58,13 +65,10 @@ def builtin_scenes() -> list[Path]:
 
 
 def output_folder(path) -> Path:
-    """An output folder that may exist already, but not as a file."""
-    from tracer.errors import UserError
+    """An output folder that may exist already, but not as a file, and that can be written."""
+    from tracer.imageio import check_output_folder
 
-    out = Path(path)
-    if out.exists() and not out.is_dir():
-        raise UserError(f"{out}: exists and is not a folder")
-    return out
+    return check_output_folder(path)
 
 
 def load(args):
@@ -74,11 +78,32 @@ def load(args):
     return scene.with_overrides(spp=args.spp, max_depth=args.max_depth, size=args.size)
 
 
+def check_finite(image, what: str = "the render") -> None:
+    """Refuse to write an image with infinite or NaN pixels (float32 overflowed)."""
+    import numpy as np
+
+    from tracer.errors import UserError
+
+    bad = int(np.count_nonzero(~np.isfinite(image)))
+    if bad:
+        raise UserError(f"{what} overflowed float32 in {bad:,} pixel values (light this strong "
+                        "exceeds 3.4e38 once it reaches a surface: scale intensities and "
+                        "radiances down); nothing was written")
+
+
+def shown(path) -> str:
+    """A path as printed: bytes that are not UTF-8 escaped."""
+    from tracer.errors import one_line
+
+    return one_line(str(path), 300)
+
+
 def _note_spp(scene) -> None:
     n = scene.film.strata
     if n * n != scene.film.spp:
-        print(f"whitted: note: spp {scene.film.spp} is not a square; using {n * n} "
-              f"({n}x{n} strata), as Mitsuba's stratified sampler does", file=sys.stderr)
+        # On stdout: stderr holds nothing but the one line of an error.
+        print(f"note: spp {scene.film.spp} is not a square; using {n * n} "
+              f"({n}x{n} strata), as Mitsuba's stratified sampler does", flush=True)
 
 
 class Progress:
@@ -124,6 +149,9 @@ def cmd_render(args) -> int:
 
         compile_lpe(args.lpe)  # refuse a bad expression before anything renders
     scene = load(args)
+    from tracer.limits import check_render
+
+    check_render(scene)
     _note_spp(scene)
     name = _backend(args)
     from tracer.integrator import Integrator
@@ -134,10 +162,11 @@ def cmd_render(args) -> int:
         raise UserError(f"--min-weight: expected a number >= 0, got {args.min_weight}")
     result = Integrator(scene, seed=args.seed, lpe=args.lpe, min_weight=args.min_weight).render(
         Progress(f"render {scene.name}"))
+    check_finite(result.image)
     write_image(out, result.image)
     rays = ", ".join(str(r) for r in result.rays_per_level)
-    only = f", only paths {args.lpe}" if args.lpe else ""
-    print(f"wrote {out} ({_describe(scene)}, {name}{only}) in {result.seconds:.3f} s; "
+    only = f", only paths {shown(args.lpe)}" if args.lpe else ""
+    print(f"wrote {shown(out)} ({_describe(scene)}, {name}{only}) in {result.seconds:.3f} s; "
           f"rays per level: {rays}; shadow rays: {sum(result.shadow_rays_per_level)}")
     return EXIT_OK
 
@@ -147,13 +176,17 @@ def cmd_reference(args) -> int:
 
     out = check_output_path(args.output)
     scene = load(args)
+    from tracer.limits import check_render
+
+    check_render(scene, mitsuba=True)
     _note_spp(scene)
     name = _backend(args)
     from reference.render import render_reference
 
     result = render_reference(scene, args.integrator, seed=args.seed)
+    check_finite(result.image, "Mitsuba's render")
     write_image(out, result.image)
-    print(f"wrote {out} (Mitsuba, {args.integrator} integrator, {_describe(scene)}, "
+    print(f"wrote {shown(out)} (Mitsuba, {args.integrator} integrator, {_describe(scene)}, "
           f"{name}) in {result.seconds:.3f} s")
     return EXIT_OK
 
@@ -219,18 +252,29 @@ def format_comparison(c) -> str:
 
 
 def cmd_compare(args) -> int:
+    from reference.compare import choose_test, comparable, compare_scene
+    from tracer.errors import UserError
+    from tracer.limits import check_render
+
     scene = load(args)
+    reference = _reference_option(args)
+    if reference == "direct" and choose_test(comparable(scene), "direct") == "z-test":
+        given = "--integrator" if args.integrator is not None else "--reference"
+        raise UserError(f"{given} direct: {scene.name} has mirrors, glass or sampled "
+                        "lights, whose comparison needs the per-pixel variance that Mitsuba's "
+                        "direct integrator does not give; use --reference deterministic "
+                        "(the default) or onelobe")
+    check_render(scene)
+    check_render(scene, moments=True, mitsuba=True)
     _note_spp(scene)
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
     _backend(args)
-    from reference.compare import compare_scene
-
-    reference = _reference_option(args)
     result, _, _ = compare_scene(scene, outdir, reference,
                                  progress=Progress(f"render {scene.name}"),
-                                 second_opinion=False if args.no_second_opinion else None)
+                                 second_opinion=False if args.no_second_opinion else None,
+                                 seed=args.seed)
     print(format_comparison(result))
-    print(f"wrote {outdir}/" + ", ".join(Path(f).name for f in result.files.values()))
+    print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in result.files.values()))
     return EXIT_OK if result.passed else EXIT_FAIL
 
 
@@ -253,10 +297,13 @@ def cmd_export(args) -> int:
 
     out = check_output_path(args.output, (".xml",), "file type")
     scene = load(args)
+    from tracer.limits import check_depth
+
+    check_depth(scene.film.max_depth)  # Mitsuba reads it as a 32-bit integer
     from reference.mitsuba_scene import write_xml
 
     files = write_xml(scene, out, args.integrator)
-    print("wrote " + ", ".join(str(f) for f in files))
+    print("wrote " + ", ".join(shown(f) for f in files))
     return EXIT_OK
 
 
@@ -270,6 +317,12 @@ def cmd_fresnel(args) -> int:
         raise UserError(f"--samples: expected at least 100, got {args.samples}")
     if not 0 < args.step <= 45:
         raise UserError(f"--step: expected a number of degrees in (0, 45], got {args.step:g}")
+    from tracer import limits
+
+    # Per index and side, one table row per angle step, each sampled --samples times.
+    per_table = (int(90 / args.step) + 2) * args.samples
+    limits.check_samples(2 * len(args.ior) * per_table, "the Fresnel table")
+    limits.check_memory(per_table * limits.FRESNEL_BYTES_PER_SAMPLE, "the Fresnel table")
     out = output_folder(args.output)
     _backend(args)
     from reference.fresnel_curves import fresnel_table, write_outputs
@@ -277,7 +330,7 @@ def cmd_fresnel(args) -> int:
     table = fresnel_table(tuple(args.ior), args.step, args.samples, args.seed)
     files = write_outputs(table, out)
     print(format_fresnel(table))
-    print("wrote " + ", ".join(str(f) for f in files))
+    print("wrote " + ", ".join(shown(f) for f in files))
     return EXIT_OK if table.passed else EXIT_FAIL
 
 
@@ -328,24 +381,43 @@ def cmd_report(args) -> int:
     return EXIT_OK if report.passed else EXIT_FAIL
 
 
+#: Most timed runs per depth of a depth sweep.
+MAX_REPEAT = 100
+
+
 def cmd_depth_sweep(args) -> int:
     from reference.depth_sweep import depth_sweep, explain, parse_depths, write_outputs
     from tracer.errors import UserError
 
     depths = parse_depths(args.depths)
-    if args.repeat < 1:
-        raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
-    out = output_folder(args.output)
+    if not 1 <= args.repeat <= MAX_REPEAT:
+        raise UserError(f"--repeat: expected a number from 1 to {MAX_REPEAT}, got "
+                        f"{args.repeat:,}")
+    if not args.min_weight >= 0:
+        raise UserError(f"--min-weight: expected a number >= 0, got {args.min_weight}")
     scene = load(args)
+    from tracer.imageio import StagedFolder
+    from tracer.limits import check_render
+
+    deepest = scene.with_overrides(max_depth=max(depths) + 1)
+    check_render(deepest)
+    if not args.no_mitsuba:
+        check_render(deepest, mitsuba=True)
     _note_spp(scene)
-    _backend(args)
-    print(f"depth sweep of {scene.name} ({_describe(scene).rsplit(',', 1)[0]}), DEPTH "
-          f"{', '.join(map(str, depths))}, {args.repeat} timed run(s) each", flush=True)
-    rows = depth_sweep(scene, depths, args.repeat, out, mitsuba=not args.no_mitsuba,
-                       log=lambda m: print(m, flush=True), min_weight=args.min_weight)
-    files = write_outputs(rows, out, scene.name)
+    # The images appear in the folder only when the sweep is complete: an interrupted
+    # or failed sweep leaves nothing behind.
+    with StagedFolder(args.output) as staged:
+        _backend(args)
+        print(f"depth sweep of {scene.name} ({_describe(scene).rsplit(',', 1)[0]}), DEPTH "
+              f"{', '.join(map(str, depths))}, {args.repeat} timed run(s) each", flush=True)
+        rows = depth_sweep(scene, depths, args.repeat, staged.path, mitsuba=not args.no_mitsuba,
+                           log=lambda m: print(m, flush=True), min_weight=args.min_weight,
+                           seed=args.seed)
+        files = write_outputs(rows, staged.path, scene.name)
+        staged.commit()
     print(explain(rows))
-    print("wrote " + ", ".join(str(f) for f in files) + f" and depth_*.png in {out}")
+    print("wrote " + ", ".join(shown(staged.final(f)) for f in files) +
+          f" and depth_*.png in {shown(staged.target)}")
     return EXIT_OK
 
 
@@ -355,6 +427,7 @@ def cmd_paths(args) -> int:
     out = check_output_path(args.output, (".png",))
     scene = load(args)
     from reference.paths import (
+        MAX_PIXELS,
         WANTED,
         draw,
         ldde_lsde_panel,
@@ -362,14 +435,21 @@ def cmd_paths(args) -> int:
         pick_pixels,
         ray_trees,
     )
+    from tracer.errors import UserError
+    from tracer.limits import check_render
 
+    if len(args.pixel or []) > MAX_PIXELS:
+        raise UserError(f"--pixel: at most {MAX_PIXELS} pixels, got {len(args.pixel):,}")
     pixels = [parse_pixel(p, scene.film.width, scene.film.height) for p in args.pixel or []]
+    check_render(scene)
+    if not args.no_mitsuba:
+        check_render(scene.with_overrides(max_depth=3, spp=64), mitsuba=True)
     _backend(args)
     from tracer.integrator import Integrator
 
     notes = []
     if not pixels:
-        picked = pick_pixels(scene)
+        picked = pick_pixels(scene, seed=args.seed)
         for expr in WANTED:
             if picked[expr] is None:
                 why = (" (a point, spot or directional light cannot be seen: only area "
@@ -378,18 +458,22 @@ def cmd_paths(args) -> int:
             else:
                 notes.append(f"{expr}: pixel {picked[expr][0]},{picked[expr][1]}.")
         pixels = sorted({p for p in picked.values() if p is not None})
+        if not pixels:
+            notes.append("No pixel of this scene shows a Whitted light path: no ray trees to "
+                         "draw (give pixels with --pixel X,Y to draw theirs).")
     notes.append("LDDE and LSDE: a Whitted tracer makes no such paths (no indirect diffuse "
-                 "light, no caustics): see the right panel.")
-    image = Integrator(scene).render().image
-    trees = ray_trees(scene, pixels)
-    panel = None if args.no_mitsuba else ldde_lsde_panel(scene)
+                 "light, no caustics)" + ("." if args.no_mitsuba else ": see the right panel."))
+    image = Integrator(scene, seed=args.seed).render().image
+    check_finite(image)
+    trees = ray_trees(scene, pixels) if pixels else []
+    panel = None if args.no_mitsuba else ldde_lsde_panel(scene, seed=args.seed)
     draw(scene, image, trees, str(out), notes, panel)
     for t in trees:
         print(f"pixel {t.pixel[0]},{t.pixel[1]}: " +
               (", ".join(sorted(set(t.paths), key=lambda s: (len(s), s))) or "no light"))
     for n in notes:
         print(n)
-    print(f"wrote {out}")
+    print(f"wrote {shown(out)}")
     return EXIT_OK
 
 
@@ -405,17 +489,30 @@ def cmd_scenes(args) -> int:
 # ---------------------------------------------------------------- parser
 
 
+class Parser(argparse.ArgumentParser):
+    """argparse, with its errors in one line that points to --help (not usage + error)."""
+
+    def error(self, message: str):
+        from tracer.errors import one_line
+
+        self.exit(EXIT_USAGE, f"{self.prog}: error: {one_line(message)} "
+                              f"(see {self.prog} --help)\n")
+
+
 def build_parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
+    p = Parser(
         prog="whitted",
         description="A Whitted ray tracer on Dr.Jit that proves itself against Mitsuba 3. "
                     "SCENE is a TOML scene file or the name of a built-in scene "
                     "(see `whitted scenes`).",
-        epilog="Exit status: 0 success, 1 comparison outside tolerance, 2 bad input.")
+        epilog="Exit status: 0 success, 1 comparison outside tolerance, 2 bad input or a "
+               "file that cannot be written (one line on stderr). Limits on work and memory: "
+               "WHITTED_MAX_SAMPLES, WHITTED_MAX_MEMORY, WHITTED_MAX_DEPTH, "
+               "WHITTED_MAX_PRIMITIVES, WHITTED_MAX_SCENE_BYTES, WHITTED_LPE_MAX_STATES.")
     p.add_argument("--version", action="version", version=_version())
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
-    def scene_opts(sp, output_help=None, output_required=True):
+    def scene_opts(sp, output_help=None, output_required=True, seed=True):
         sp.add_argument("scene", metavar="SCENE", help="scene file (.toml) or built-in name")
         if output_help:
             sp.add_argument("-o", "--output", required=output_required, help=output_help)
@@ -426,8 +523,11 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                         help="Dr.Jit backend (default: WHITTED_BACKEND or auto: CUDA if "
                              "there is a GPU, else LLVM)")
-        sp.add_argument("--seed", type=int, default=0,
-                        help="seed for the random numbers (area lights only)")
+        if seed:
+            sp.add_argument("--seed", type=int, default=0,
+                            help="seed of the random numbers (area-light samples, the "
+                                 "reference's lobe choices): any integer, hashed to 32 bits "
+                                 "beyond 0..2^32-1")
 
     r = sub.add_parser("render", help="render a scene with the tracer (no Mitsuba involved)",
                        description="Render SCENE with whitted's own tracer.")
@@ -477,7 +577,7 @@ def build_parser() -> argparse.ArgumentParser:
     e = sub.add_parser("export", help="write the scene as Mitsuba 3 XML",
                        description="Write SCENE as a Mitsuba 3 XML file that Mitsuba renders "
                                    "to the same picture as `whitted reference`.")
-    scene_opts(e, "output .xml file (triangles go to meshes/*.obj beside it)")
+    scene_opts(e, "output .xml file (triangles go to meshes/NAME_*.obj beside it)", seed=False)
     e.add_argument("--integrator", choices=("whitted", "direct", "path"), default="whitted",
                    help="integrator written into the XML (whitted needs `import reference` "
                         "before loading; direct and path are stock Mitsuba)")
@@ -497,7 +597,8 @@ def build_parser() -> argparse.ArgumentParser:
     f.add_argument("--step", type=float, default=0.5, help="angle step in degrees (default 0.5)")
     f.add_argument("--samples", type=int, default=100_000,
                    help="plugin samples per angle (default 100000)")
-    f.add_argument("--seed", type=int, default=0, help="seed of the plugin's sample numbers")
+    f.add_argument("--seed", type=int, default=0,
+                   help="seed of the plugin's sample numbers (any integer)")
     f.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                    help="Dr.Jit backend")
     f.set_defaults(func=cmd_fresnel)
@@ -551,8 +652,9 @@ def build_parser() -> argparse.ArgumentParser:
                                     "tracer finds LDDE and LSDE paths, which a Whitted tracer "
                                     "cannot make.")
     scene_opts(pa, "output .png")
-    pa.add_argument("--pixel", action="append", metavar="X,Y",
-                    help="a pixel to draw (repeatable); default: picked automatically")
+    pa.add_argument("--pixel", action="extend", nargs="+", metavar="X,Y",
+                    help="pixels to draw: --pixel 1,2 3,4 (or repeated); default: picked "
+                         "automatically")
     pa.add_argument("--no-mitsuba", action="store_true",
                     help="leave out the LDDE/LSDE panel rendered on Mitsuba")
     pa.set_defaults(func=cmd_paths)
@@ -571,22 +673,93 @@ def _version() -> str:
         return "whitted (not installed)"
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
-    from tracer import backend, llvm
-    from tracer.errors import UserError
-
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so that the interpreter's last flush cannot fail again."""
     try:
-        return args.func(args)
-    except (UserError, llvm.LLVMUnavailable, backend.BackendUnavailable) as e:
-        print(f"whitted: error: {e}", file=sys.stderr)
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError, io.UnsupportedOperation):
+        pass
+
+
+class StdoutError(Exception):
+    """Standard output cannot be written (a full device, a closed terminal)."""
+
+
+class _Stdout:
+    """sys.stdout, with its OS errors told apart from those of output files."""
+
+    def __init__(self, stream):
+        self.stream = stream
+
+    def write(self, text):
+        try:
+            return self.stream.write(text)
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise StdoutError(e.strerror or str(e)) from None
+
+    def flush(self):
+        try:
+            self.stream.flush()
+        except BrokenPipeError:
+            raise
+        except OSError as e:
+            raise StdoutError(e.strerror or str(e)) from None
+
+    def __getattr__(self, name):
+        return getattr(self.stream, name)
+
+
+def main(argv: list[str] | None = None) -> int:
+    from tracer.errors import one_line
+
+    # A name that is not UTF-8 reaches Python as surrogates: print them escaped.
+    for stream in (sys.stdout, sys.stderr):
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
+
+    def fail(message: str) -> int:
+        print(f"whitted: error: {one_line(message)}", file=sys.stderr)
         return EXIT_USAGE
+
+    stdout = sys.stdout
+    sys.stdout = _Stdout(stdout)
+    try:
+        parser = build_parser()
+        try:
+            args = parser.parse_args(argv)
+        except SystemExit as e:  # --help, --version, or a one-line parser error
+            return e.code if isinstance(e.code, int) else EXIT_USAGE
+        from tracer import backend, llvm
+        from tracer.errors import UserError
+
+        try:
+            rc = args.func(args)
+            sys.stdout.flush()
+            return rc
+        except (UserError, llvm.LLVMUnavailable, backend.BackendUnavailable) as e:
+            return fail(str(e))
     except KeyboardInterrupt:
         print("whitted: interrupted", file=sys.stderr)
         return 130
-    except BrokenPipeError:
+    except BrokenPipeError:  # `whitted scenes | head`: the reader has all it wants
+        _silence_stdout()
         return EXIT_OK
+    except StdoutError as e:
+        sys.stdout = stdout
+        _silence_stdout()
+        return fail(f"cannot write to standard output: {e}")
+    except OSError as e:
+        where = f"{e.filename}: " if getattr(e, "filename", None) else ""
+        return fail(f"{where}{e.strerror or e}")
+    except RecursionError:
+        return fail("input nested too deeply to process")
+    except MemoryError:
+        return fail("out of memory (lower the limits: WHITTED_MAX_MEMORY)")
+    finally:
+        sys.stdout = stdout
 
 
 def entrypoint() -> None:

@@ -623,8 +623,10 @@ def tracer_pooled(scene, seeds: int = TRACER_SEEDS, first_seed: int = 0) -> Pool
     m1 = m2 = 0.0
     s1 = s2 = 0.0
     spp = scene.film.strata ** 2
-    for k in range(first_seed, first_seed + seeds):
-        r = Integrator(scene, seed=k).render(moments=True)
+    from tracer.sampling import seed32
+
+    for k in range(seeds):
+        r = Integrator(scene, seed=(seed32(first_seed) + k) & 0xFFFFFFFF).render(moments=True)
         mean = r.image.astype(np.float64)
         m1 = m1 + mean / seeds
         m2 = m2 + (r.variance.astype(np.float64) * spp + mean ** 2) / seeds
@@ -722,8 +724,8 @@ def second_opinion_scene(scene):
 
 
 def compare_scene(scene, outdir: str | Path | None = None, reference: str = "deterministic",
-                  progress=None, passes: int | None = None, second_opinion: bool | None = None
-                  ) -> tuple[Comparison, np.ndarray, np.ndarray]:
+                  progress=None, passes: int | None = None, second_opinion: bool | None = None,
+                  seed: int = 0) -> tuple[Comparison, np.ndarray, np.ndarray]:
     """Render ``scene`` with the tracer and with Mitsuba, compare, and write the outputs.
 
     ``reference`` is ``deterministic`` (default), ``onelobe`` (``whitted``, the
@@ -738,7 +740,9 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
     tracer-only parts is judged with those parts replaced by Mitsuba's
     equivalent (:func:`comparable`); the full render's difference from
     Mitsuba is reported as the expected deviation (``deviation.png``), and
-    ``tracer.exr`` is the full render.
+    ``tracer.exr`` is the full render. ``seed`` seeds both sides' random numbers
+    (the tracer's area-light samples, which the deterministic reference reads too,
+    and the one-lobe reference's lobe and light choices).
     """
     from reference.deterministic import shares_light_samples
     from reference.render import render_reference
@@ -759,19 +763,20 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
                     "(reference.deterministic.SAMPLE_MAPS), so the one-lobe reference judges it")
     integrator = INTEGRATOR_OF[reference]
     test_name = choose_test(scene, reference)
-    integ = Integrator(scene)
+    integ = Integrator(scene, seed=seed)
     integ.render()  # warm-up: compiles the kernels, so that both sides are timed warm
     tr = integ.render(progress)
     # The median of three warm renders, as Mitsuba's time is the median of warm passes.
     tr.seconds = float(np.median([tr.seconds] + [integ.render().seconds for _ in range(2)]))
     tracer_image = tr.image
     if test_name == "z-test":
-        st = statistical_comparison(scene, tr.image, reference, passes)
+        st = statistical_comparison(scene, tr.image, reference, passes, seed=seed,
+                                    tracer_seed=seed)
         ref, metrics, verdict, tracer_image = st.ref, st.metrics, st.verdict, st.tracer_image
     else:
-        # The deterministic reference reads the tracer's light samples of seed 0, the
-        # seed the tracer rendered with.
-        ref = render_reference(scene, integrator, seed=0)
+        # The deterministic reference reads the tracer's light samples of the seed the
+        # tracer rendered with.
+        ref = render_reference(scene, integrator, seed=seed)
         metrics = image_metrics(tr.image, ref.image)
         verdict, _ = judge(test_name, metrics, tr.image, ref.image)
     reason = verdict.reason + fallback
@@ -780,7 +785,7 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
                   "light samples): " + reason)
     full_image, deviation = tracer_image, None
     if scene is not full_scene:
-        full_image = Integrator(full_scene).render().image
+        full_image = Integrator(full_scene, seed=seed).render().image
         deviation = asdict(image_metrics(full_image, ref.image))
         reason += ("; tracer-only parts (" + ", ".join(full_scene.tracer_only) +
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
@@ -798,7 +803,7 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
     if second_opinion and reference == "deterministic":
         small = second_opinion_scene(scene)
         st = statistical_comparison(small, tr.image if small is scene else None, "onelobe",
-                                    passes)
+                                    passes, seed=seed, tracer_seed=seed)
         onelobe_image = st.ref.image
         second = {"reference": "onelobe", "integrator": "whitted", "test": st.verdict.test,
                   "size": [small.film.width, small.film.height],
@@ -821,6 +826,12 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
         description=full_scene.description, tracer_only=list(full_scene.tracer_only),
         expected_deviation=deviation, reference=reference, second_opinion=second)
     if outdir is not None:
+        from tracer.errors import UserError
+
+        for side, img in (("the tracer's", full_image), ("Mitsuba's", ref.image)):
+            if not np.isfinite(img).all():
+                raise UserError(f"{side} render overflowed float32 (light too strong: scale "
+                                "intensities and radiances down); nothing was written")
         out = Path(outdir)
         out.mkdir(parents=True, exist_ok=True)
         write_exr(out / "tracer.exr", full_image)
@@ -837,5 +848,21 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
                      f"{scene.name}: expected deviation ({', '.join(full_scene.tracer_only)})")
             names.append("deviation.png")
         result.files = {k: str(out / k) for k in names}
-        (out / "metrics.json").write_text(json.dumps(result.to_json(), indent=2) + "\n")
+        write_json(out / "metrics.json", result.to_json())
     return result, full_image, ref.image
+
+
+def _finite(v):
+    """The value with every NaN or infinite float replaced by None (JSON's null)."""
+    if isinstance(v, float):
+        return v if math.isfinite(v) else None
+    if isinstance(v, dict):
+        return {k: _finite(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [_finite(x) for x in v]
+    return v
+
+
+def write_json(path: str | Path, data) -> None:
+    """Write strict JSON (RFC 8259 has no NaN or Infinity): undefined numbers become null."""
+    Path(path).write_text(json.dumps(_finite(data), indent=2, allow_nan=False) + "\n")

@@ -23,25 +23,31 @@ from pathlib import Path
 
 from tracer.errors import UserError
 
+#: Deepest DEPTH a sweep renders (max_depth = DEPTH + 1).
+MAX_SWEEP_DEPTH = 200
+
 
 def parse_depths(text: str) -> list[int]:
-    """``"1-5,10,20,25"`` -> [1, 2, 3, 4, 5, 10, 20, 25] (Heckbert's DEPTH, >= 1)."""
+    """``"1-5,10,20,25"`` -> [1, 2, 3, 4, 5, 10, 20, 25] (Heckbert's DEPTH, 1 to 200).
+
+    Bounds are checked before a range is expanded, so ``1-300000000`` is
+    refused at once rather than built.
+    """
     out: set[int] = set()
+    shown = text if len(text) <= 60 else text[:60] + "..."
     for part in text.split(","):
         part = part.strip()
         try:
-            if "-" in part:
-                a, b = (int(x) for x in part.split("-", 1))
-                if a > b:
-                    raise ValueError
-                out.update(range(a, b + 1))
-            else:
-                out.add(int(part))
+            a, b = (int(x) for x in part.split("-", 1)) if "-" in part[1:] else (int(part),) * 2
+            if a > b:
+                raise ValueError
         except ValueError:
             raise UserError(f"--depths: expected numbers and ranges like 1-5,10,20, got "
-                            f"{text!r}") from None
-    if not out or min(out) < 1 or max(out) > 200:
-        raise UserError(f"--depths: expected depths from 1 to 200, got {text!r}")
+                            f"{shown!r}") from None
+        if a < 1 or b > MAX_SWEEP_DEPTH:
+            raise UserError(f"--depths: expected depths from 1 to {MAX_SWEEP_DEPTH}, got "
+                            f"{shown!r}")
+        out.update(range(a, b + 1))
     return sorted(out)
 
 
@@ -59,7 +65,7 @@ class DepthRow:
 
 
 def depth_sweep(scene, depths: list[int], repeat: int, outdir: Path, mitsuba: bool = True,
-                log=print, min_weight: float = 0.0) -> list[DepthRow]:
+                log=print, min_weight: float = 0.0, seed: int = 0) -> list[DepthRow]:
     from reference.render import render_reference
     from tracer.imageio import write_png
     from tracer.integrator import Integrator
@@ -68,7 +74,7 @@ def depth_sweep(scene, depths: list[int], repeat: int, outdir: Path, mitsuba: bo
     rows = []
     for depth in depths:
         s = scene.with_overrides(max_depth=depth + 1)
-        integ = Integrator(s, min_weight=min_weight)
+        integ = Integrator(s, seed=seed, min_weight=min_weight)
         integ.render()  # warm-up
         times, result = [], None
         for _ in range(repeat):
@@ -79,7 +85,7 @@ def depth_sweep(scene, depths: list[int], repeat: int, outdir: Path, mitsuba: bo
         write_png(outdir / name, result.image)
         m_sec = None
         if mitsuba:
-            ref = render_reference(s, passes=repeat + 1)  # median of the warm passes
+            ref = render_reference(s, seed=seed, passes=repeat + 1)  # median of warm passes
             m_sec = ref.seconds
             write_png(outdir / f"depth_{depth:02d}_mitsuba.png", ref.image)
         row = DepthRow(depth, depth + 1, statistics.median(times), result.rays_total,

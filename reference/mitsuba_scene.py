@@ -288,7 +288,7 @@ _CHILD_TAGS = {"film": "film", "sampler": "sampler", "rfilter": "rfilter", "bsdf
 
 
 def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = None,
-         name: str | None = None) -> list[str]:
+         name: str | None = None, mesh_prefix: str = "") -> list[str]:
     pad = "    " * indent
     id_attr = f" id={quoteattr(obj_id)}" if obj_id else ""
     name_attr = f" name={quoteattr(name)}" if name else ""
@@ -296,13 +296,14 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
         return [f'{pad}<ref id={quoteattr(tree["id"][1])}/>']
     if tree["type"] == "mesh":
         meshes.append(tree)
+        filename = quoteattr(f"meshes/{mesh_prefix}{tree['name']}.obj")
         lines = [f'{pad}<shape type="obj"{id_attr}>',
-                 f'{pad}    <string name="filename" value="meshes/{tree["name"]}.obj"/>',
+                 f'{pad}    <string name="filename" value={filename}/>',
                  f'{pad}    <boolean name="face_normals" value="'
                  f'{"true" if tree["normals"] is None else "false"}"/>']
-        lines += _xml(tree["bsdf"], "bsdf", indent + 1, meshes)
+        lines += _xml(tree["bsdf"], "bsdf", indent + 1, meshes, mesh_prefix=mesh_prefix)
         if "emitter" in tree:
-            lines += _xml(tree["emitter"], "emitter", indent + 1, meshes)
+            lines += _xml(tree["emitter"], "emitter", indent + 1, meshes, mesh_prefix=mesh_prefix)
         return lines + [f"{pad}</shape>"]
     lines = [f'{pad}<{tag} type="{tree["type"]}"{id_attr}{name_attr}>']
     for k, v in tree.items():
@@ -314,11 +315,12 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
             continue
         if isinstance(v, dict):
             if k.startswith("shape_"):
-                lines += _xml(v, "shape", indent + 1, meshes)
+                lines += _xml(v, "shape", indent + 1, meshes, mesh_prefix=mesh_prefix)
             elif k in _CHILD_TAGS:
-                lines += _xml(v, _CHILD_TAGS[k], indent + 1, meshes)
+                lines += _xml(v, _CHILD_TAGS[k], indent + 1, meshes, mesh_prefix=mesh_prefix)
             else:  # a texture given for a parameter, e.g. reflectance
-                lines += _xml(v, "texture", indent + 1, meshes, name=k)
+                lines += _xml(v, "texture", indent + 1, meshes, name=k,
+                              mesh_prefix=mesh_prefix)
             continue
         kind, val = v
         if kind == "matrix":
@@ -358,9 +360,21 @@ def _write_obj(path: Path, node: dict) -> None:
     path.write_text("".join(lines))
 
 
+def _comment(text: str) -> str:
+    """Text safe inside an XML comment (no "--", printable)."""
+    from tracer.errors import one_line
+
+    return one_line(text, 200).replace("--", "- -")
+
+
 def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> list[Path]:
-    """Write the scene as Mitsuba 3 XML (plus ``meshes/*.obj`` for triangles); return the files."""
+    """Write the scene as Mitsuba 3 XML (plus ``meshes/*.obj`` for triangles); return the files.
+
+    Mesh files are named after the XML file (``meshes/NAME_shape_2.obj`` for
+    ``NAME.xml``), so that scenes exported into one folder keep their own.
+    """
     path = Path(path)
+    mesh_prefix = path.stem + "_"
     tree = scene_tree(scene, integrator)
     meshes: list[dict] = []
     body = []
@@ -370,7 +384,8 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
         tag = {"sensor": "sensor", "integrator": "integrator"}.get(key)
         if tag is None:
             tag = "emitter" if key.startswith("light_") else "shape"
-        body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None)
+        body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None,
+                     mesh_prefix=mesh_prefix)
     plugins = [name for name in plugin_names()
                if any(f'type="{name}"' in line for line in body)]
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
@@ -382,14 +397,14 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
                  "reference.mitsuba().")
     header = [
         '<?xml version="1.0" encoding="utf-8"?>',
-        f"<!-- Exported by whitted from {scene.path}. {note} -->",
+        f"<!-- Exported by whitted from {_comment(scene.path)}. {note} -->",
         '<scene version="3.0.0">',
     ]
     files = []
     if meshes:
         (path.parent / "meshes").mkdir(parents=True, exist_ok=True)
     for m in meshes:
-        obj = path.parent / "meshes" / f"{m['name']}.obj"
+        obj = path.parent / "meshes" / f"{mesh_prefix}{m['name']}.obj"
         _write_obj(obj, m)
         files.append(obj)
     path.write_text("\n".join(header + body + ["</scene>", ""]))

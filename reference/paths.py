@@ -28,6 +28,8 @@ from tracer.errors import UserError
 
 DRAW_MIN_WEIGHT = 1e-3
 WANTED = ("LE", "LDE", "LSE", "LDSE")
+#: Most pixels one picture draws the ray trees of.
+MAX_PIXELS = 64
 
 
 @dataclass
@@ -46,12 +48,13 @@ class Tree:
 
 
 def parse_pixel(text: str, width: int, height: int) -> tuple[int, int]:
+    shown = text if len(text) <= 40 else text[:40] + "..."
     try:
         x, y = (int(v) for v in text.split(","))
     except ValueError:
-        raise UserError(f"--pixel: expected X,Y such as 12,20, got {text!r}") from None
+        raise UserError(f"--pixel: expected X,Y such as 12,20, got {shown!r}") from None
     if not (0 <= x < width and 0 <= y < height):
-        raise UserError(f"--pixel {text}: outside the {width}x{height} image")
+        raise UserError(f"--pixel {shown}: outside the {width}x{height} image")
     return x, y
 
 
@@ -222,15 +225,15 @@ def _clip_to_front(scene, a: np.ndarray, b: np.ndarray):
     return a, b
 
 
-def pick_pixels(scene, wanted=WANTED) -> dict[str, tuple[int, int] | None]:
+def pick_pixels(scene, wanted=WANTED, seed: int = 0) -> dict[str, tuple[int, int] | None]:
     """A pixel whose light mostly travels along each wanted path, or None if no pixel does."""
     from tracer.integrator import Integrator
 
     quick = scene.with_overrides(spp=1)
-    full = Integrator(quick).render().image.sum(-1)
+    full = Integrator(quick, seed=seed).render().image.sum(-1)
     out = {}
     for expr in wanted:
-        part = Integrator(quick, lpe=expr).render().image.sum(-1)
+        part = Integrator(quick, seed=seed, lpe=expr).render().image.sum(-1)
         share = np.where(full > 0, part / np.maximum(full, 1e-30), 0)
         score = np.where(share > 0.5, part, 0)
         if score.max() <= 0:
@@ -302,13 +305,13 @@ def draw(scene, image: np.ndarray, trees: list[Tree], path: str, notes: list[str
     plt.close(fig)
 
 
-def ldde_lsde_panel(scene, spp: int = 64):
+def ldde_lsde_panel(scene, spp: int = 64, seed: int = 0):
     """(luminance image, title): Mitsuba path (3 segments) minus Whitted (3 segments)."""
     from reference.render import render_reference
 
     s = scene.with_overrides(max_depth=3, spp=spp)
-    path = render_reference(s, "path", jitter=True).image
-    whitted = render_reference(s, "whitted", jitter=True).image
+    path = render_reference(s, "path", seed=seed, jitter=True).image
+    whitted = render_reference(s, "whitted", seed=seed, jitter=True).image
     extra = np.maximum((path - whitted).mean(-1), 0)
     share = extra.sum() / max(path.mean(-1).sum(), 1e-30)
     title = (f"LDDE + LSDE: Mitsuba's path tracer (3 segments) minus Whitted;\n"

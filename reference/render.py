@@ -43,6 +43,7 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     ``jitter`` moves samples to random places inside their strata (the default,
     strata centres, is what the tracer uses).
 
+    ``seed`` may be any integer (see :func:`tracer.sampling.seed32`).
     ``passes`` renders the scene that many times with seeds seed, seed + 1, ...
     and pools them: the same sample positions, independent random choices,
     ``passes x spp`` samples per pixel. A single pass of 64 samples misses the
@@ -67,6 +68,15 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
                                seconds_total=first.seconds + warm.seconds)
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown reference integrator {integrator!r}")
+    from tracer.limits import check_render
+    from tracer.sampling import seed32
+
+    check_render(scene, moments=moments, mitsuba=True)
+    seed = seed32(seed)
+
+    def pass_seed(k: int) -> int:  # Mitsuba's seeds are 32-bit
+        return (seed + k) & 0xFFFFFFFF
+
     mi = mitsuba()
     with_moments = moments and integrator == "whitted"
     ms = load(scene, mi, integrator, with_moments, jitter)
@@ -78,9 +88,9 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     integ = ms.integrator()
     for k in range(passes):
         if hasattr(integ, "pass_seed"):  # our integrator's own random stream
-            integ.pass_seed = seed + k
+            integ.pass_seed = pass_seed(k)
         start = time.perf_counter()
-        out = np.asarray(mi.render(ms, seed=seed + k, spp=spp), dtype=np.float64)
+        out = np.asarray(mi.render(ms, seed=pass_seed(k), spp=spp), dtype=np.float64)
         elapsed = time.perf_counter() - start
         total += elapsed
         if k > 0:
@@ -95,9 +105,9 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
             rand = out[..., 6] / passes if rand is None else rand + out[..., 6] / passes
     if not warm:  # one pass: time a second, warm one (its image is not used)
         if hasattr(integ, "pass_seed"):
-            integ.pass_seed = seed + 1
+            integ.pass_seed = pass_seed(1)
         start = time.perf_counter()
-        np.asarray(mi.render(ms, seed=seed + 1, spp=spp))
+        np.asarray(mi.render(ms, seed=pass_seed(1), spp=spp))
         warm.append(time.perf_counter() - start)
     variance = pass_variance = None
     if with_moments:

@@ -26,7 +26,6 @@ import datetime as _dt
 import fnmatch
 import html
 import io
-import json
 import os
 import platform
 import time
@@ -34,6 +33,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+from reference.compare import write_json
 
 QUICK_WIDTH = 96
 QUICK_SPP = 16
@@ -167,7 +168,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     report.seconds = time.perf_counter() - start
     data = report.to_json()
     data["scenes"] = [{k: v for k, v in s.items() if k != "images"} for s in report.scenes]
-    (out / "report.json").write_text(json.dumps(data, indent=2) + "\n")
+    write_json(out / "report.json", data)
     (out / "report.md").write_text(markdown(report))
     (out / "index.html").write_text(html_page(report, out))
     return report

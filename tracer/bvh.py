@@ -61,7 +61,7 @@ import numpy as np
 from tracer.backend import jit
 from tracer.shapes import triangle as tri_f
 
-__all__ = ["BVH", "BVHArrays", "INVALID", "build_bvh"]
+__all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes"]
 
 #: Triangle index reported for a ray that hits nothing.
 INVALID = 0xFFFFFFFF
@@ -254,6 +254,17 @@ def build_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *, bins: int = 16,
 
     arrays = _depth_first(levels, next_id, order)
     return BVHArrays(*arrays, depth=len(levels) - 1, seconds=time.perf_counter() - t_start)
+
+
+def build_box_bvh(lo: np.ndarray, hi: np.ndarray, **options) -> BVHArrays:
+    """A binned-SAH BVH over axis-aligned boxes [lo[i], hi[i]] (e.g. placed instances).
+
+    The builder sees only the bounding box of each triangle, so box i is given
+    as the degenerate triangle (lo, hi, hi), whose bounding box it is; ``order``
+    then lists box indices. Options as for :func:`build_bvh`.
+    """
+    lo, hi = (np.asarray(a, dtype=np.float64).reshape(-1, 3) for a in (lo, hi))
+    return build_bvh(lo, hi, hi, **options)
 
 
 def _scatter(x: np.ndarray, dest: np.ndarray) -> np.ndarray:

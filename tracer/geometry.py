@@ -14,7 +14,11 @@ hierarchy (tracer/bvh.py). An instance takes the ray into its group's object
 space, asks the group's own geometry, and brings the hit record back
 (lecture 2, "Instancing"): t is kept because the ray is transformed rather
 than renormalised, points go back by the instance's to_world and normals by
-its inverse transpose.
+its inverse transpose. A few instances of a group are unrolled one after the
+other; from ``INSTANCE_SET_MIN`` on, the instances of a group sit in a
+bounding-volume hierarchy of their world-space boxes (a top-level BVH, built
+by tracer/bvh.py's builder), so that a ray visits about log n of n instances
+and the kernel's size does not grow with n.
 
 The hit record (:class:`Surface`) holds the position, the geometric normal
 (outward, unit), the shading normal (the interpolated vertex normal of a
@@ -53,6 +57,10 @@ INVALID = 0xFFFFFFFF
 
 #: Tables up to this size are unrolled into the kernel with constant numbers.
 UNROLL = 16
+
+#: A group instanced this many times or more is searched through a hierarchy of its
+#: instances' boxes (:class:`_InstanceSetBlock`); fewer are unrolled one by one.
+INSTANCE_SET_MIN = 8
 
 
 def _v3(rows) -> object:
@@ -422,6 +430,166 @@ class _InstanceBlock(_Block):
         return p, n, ns, s.uv
 
 
+def shape_bounds(shape) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi): an axis-aligned box around a shape, in the space its coordinates are in."""
+    def box_of(points):
+        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+        return p.min(axis=0), p.max(axis=0)
+
+    def corners(m, lo, hi):
+        c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])], dtype=np.float64)
+        return box_of(c @ np.asarray(m, dtype=np.float64)[:3, :3].T +
+                      np.asarray(m, dtype=np.float64)[:3, 3])
+
+    if isinstance(shape, Sphere):
+        c = np.asarray(shape.center, dtype=np.float64)
+        return c - shape.radius, c + shape.radius
+    if isinstance(shape, (Rectangle, Disk)):
+        return corners(shape.to_world, (-1, -1, 0), (1, 1, 0))
+    if isinstance(shape, (Triangle, Polygon, Mesh)):
+        return box_of(shape.vertices)
+    if isinstance(shape, Cylinder):
+        return corners(shape.local_to_world(), (-1, -1, 0), (1, 1, 1))
+    if isinstance(shape, Paraboloid):
+        s = np.sqrt(shape.height)
+        return corners(shape.to_world, (-shape.a * s, -shape.b * s, 0),
+                       (shape.a * s, shape.b * s, shape.height))
+    raise TypeError(f"no bounds for {type(shape).__name__}")
+
+
+class _InstanceSetBlock(_Block):
+    """Many instances of one group behind a BVH over their world-space boxes.
+
+    Primitive ids: instance j's copy of the group's primitive k is j * m + k,
+    m the group's primitive count. The hierarchy is built by
+    :func:`tracer.bvh.build_box_bvh` and stored in the same node records as a
+    triangle BVH (:func:`tracer.bvh.pack_nodes`); the traversal below walks
+    it like :class:`tracer.bvh.BVH` does, and at a leaf takes the ray into the
+    instance's object space and asks the group's geometry, as
+    :class:`_InstanceBlock` does for one instance.
+    """
+
+    def __init__(self, instances: list[Instance], child: Geometry, bounds):
+        from tracer.bvh import build_box_bvh, pack_nodes
+
+        self.child = child
+        self.n = len(instances)
+        self.count = self.n * child.count
+        m = np.asarray([inst.to_world for inst in instances], dtype=np.float64)
+        inv = np.linalg.inv(m)
+        normal = np.transpose(np.linalg.inv(m[:, :3, :3]), (0, 2, 1))
+        self.m_rows, self.m_t = [_v3(m[:, r, :3]) for r in range(3)], _v3(m[:, :3, 3])
+        self.inv_rows, self.inv_t = [_v3(inv[:, r, :3]) for r in range(3)], _v3(inv[:, :3, 3])
+        self.normal_rows = [_v3(normal[:, r, :]) for r in range(3)]
+        # World boxes: the group's box through each instance's to_world (its 8 corners).
+        lo, hi = bounds
+        c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
+                      for z in (lo[2], hi[2])], dtype=np.float64)
+        w = np.einsum("nij,kj->nki", m[:, :3, :3], c) + m[:, None, :3, 3]
+        arrays = build_box_bvh(w.min(axis=1), w.max(axis=1), max_leaf=1)
+        self.depth = arrays.depth
+        rec, self._root, self._stack = pack_nodes(arrays)
+        self.nodes = jit.Float(np.ascontiguousarray(
+            rec if len(rec) else np.zeros((1, 16), np.float32)).reshape(-1))
+        self.order = _u(arrays.order)
+
+    @staticmethod
+    def _apply(rows, t, idx, p, mask):
+        r = [dr.gather(jit.Array3f, row, idx, mask) for row in rows]
+        x, y, z = (dr.dot(ri, p) for ri in r)
+        if t is not None:
+            tc = dr.gather(jit.Array3f, t, idx, mask)
+            x, y, z = x + tc.x, y + tc.y, z + tc.z
+        return jit.Array3f(x, y, z)
+
+    def _to_object(self, inst, o, d, mask):
+        ol = self._apply(self.inv_rows, self.inv_t, inst, o, mask)
+        dl = self._apply(self.inv_rows, None, inst, d, mask)
+        scale = dr.norm(dl)
+        return ol, dl / scale, scale
+
+    def intersect(self, o, d, t, prim, active):
+        return self._loop(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, dr.width(t)))
+
+    @dr.syntax
+    def _loop(self, o, d, t, prim, alive):
+        from tracer.bvh import COUNT_BITS, GAMMA3, LEAF_FLAG
+
+        n = dr.width(t)
+        tiny = 1e-30
+        inv = 1.0 / jit.Array3f(*(dr.select(dr.abs(d[k]) < tiny, dr.copysign(tiny, d[k]), d[k])
+                                  for k in range(3)))
+        node = dr.full(jit.UInt32, self._root, n)
+        sp = dr.zeros(jit.UInt32, n)
+        stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
+        nodes = self.nodes
+        widen = 1 + 2 * GAMMA3
+        base, m = self.base, self.child.count
+
+        while alive:
+            while alive & ((node & LEAF_FLAG) == 0):
+                step = alive & ((node & LEAF_FLAG) == 0)
+                r = dr.gather(jit.ArrayXf, nodes, node, step, shape=(16, n))
+                tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
+                tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
+                hit_l = step & (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
+                hit_r = step & (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
+                ref_l = dr.reinterpret_array(jit.UInt32, r[12])
+                ref_r = dr.reinterpret_array(jit.UInt32, r[13])
+                r_first = tn_r < tn_l
+                near = dr.select(hit_l & ~(hit_r & r_first), ref_l, ref_r)
+                both = hit_l & hit_r
+                stack.write(dr.select(r_first, ref_l, ref_r), sp, both)
+                sp = dr.select(both, sp + 1, sp)
+                descend = hit_l | hit_r
+                pop = step & ~descend & (sp > 0)
+                sp = dr.select(pop, sp - 1, sp)
+                node = dr.select(descend, near, dr.select(pop, stack.read(sp, pop), node))
+                alive &= ~step | descend | pop
+
+            # The leaf's instances: the ray in each one's object space, the group asked.
+            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
+            end = i + (node & ((1 << COUNT_BITS) - 1))
+            while alive & (i < end):
+                act = alive & (i < end)
+                inst = dr.gather(jit.UInt32, self.order, i, act)
+                ol, dl, scale = self._to_object(inst, o, d, act)
+                hit = self.child.closest_hit(ol, dl, t * scale, act)
+                found = act & hit.valid
+                t = dr.select(found, hit.t / scale, t)
+                prim = dr.select(found, inst * m + hit.prim + base, prim)
+                i += 1
+
+            pop = alive & (sp > 0)
+            sp = dr.select(pop, sp - 1, sp)
+            node = dr.select(pop, stack.read(sp, pop), node)
+            alive &= pop
+        return t, prim
+
+    def surface(self, k, o, d, t, mask):
+        m = self.child.count
+        inst = k // m
+        ol, dl, scale = self._to_object(inst, o, d, mask)
+        s = self.child.surface(Hit(t * scale, dr.select(mask, k - inst * m, INVALID)), ol, dl)
+        p = self._apply(self.m_rows, self.m_t, inst, s.p, mask)
+        n = dr.normalize(self._apply(self.normal_rows, None, inst, s.n, mask))
+        ns = dr.normalize(self._apply(self.normal_rows, None, inst, s.ns, mask))
+        return p, n, ns, s.uv
+
+
+def _slab(o, inv, lx, ly, lz, hx, hy, hz):
+    """(t_near, t_far) of a ray against a box (Kay and Kajiya 1986), as tracer.bvh's."""
+    t0x, t1x = (lx - o.x) * inv.x, (hx - o.x) * inv.x
+    t0y, t1y = (ly - o.y) * inv.y, (hy - o.y) * inv.y
+    t0z, t1z = (lz - o.z) * inv.z, (hz - o.z) * inv.z
+    tn = dr.maximum(dr.maximum(dr.minimum(t0x, t1x), dr.minimum(t0y, t1y)),
+                    dr.minimum(t0z, t1z))
+    tf = dr.minimum(dr.minimum(dr.maximum(t0x, t1x), dr.maximum(t0y, t1y)),
+                    dr.maximum(t0z, t1z))
+    return tn, tf
+
+
 # --------------------------------------------------------------------------- geometry
 
 
@@ -463,13 +631,27 @@ class Geometry:
             self.blocks.append(block)
             mids.append(np.full(block.count, mat_id(mesh), dtype=np.uint32))
             rads.append(np.zeros((block.count, 3), dtype=np.float32))
-        for inst in of(Instance):  # the group's own materials; groups do not emit
-            child = Geometry(scene, scene.groups[inst.group], names)
-            block = _InstanceBlock(inst, child)
-            block.base = sum(b.count for b in self.blocks)
-            self.blocks.append(block)
-            mids.append(child.material_id.numpy()[:child.count])
-            rads.append(np.zeros((block.count, 3), dtype=np.float32))
+        # Instances: one geometry per group (its own materials; groups do not emit), the
+        # instances of a much-used group in one hierarchy, the others one by one.
+        by_group: dict[str, list[Instance]] = {}
+        for inst in of(Instance):
+            by_group.setdefault(inst.group, []).append(inst)
+        for gname, insts in by_group.items():
+            members = scene.groups[gname]
+            child = Geometry(scene, members, names)
+            child_mid = child.material_id.numpy()[:child.count]
+            if len(insts) >= INSTANCE_SET_MIN:
+                boxes = [shape_bounds(s) for s in members]
+                bounds = (np.min([b[0] for b in boxes], axis=0),
+                          np.max([b[1] for b in boxes], axis=0))
+                group_blocks = [_InstanceSetBlock(insts, child, bounds)]
+            else:
+                group_blocks = [_InstanceBlock(inst, child) for inst in insts]
+            for block in group_blocks:
+                block.base = sum(b.count for b in self.blocks)
+                self.blocks.append(block)
+                mids.append(np.tile(child_mid, block.count // max(child.count, 1)))
+                rads.append(np.zeros((block.count, 3), dtype=np.float32))
         self.count = sum(b.count for b in self.blocks)
         mid = np.concatenate(mids) if mids else np.zeros(1, dtype=np.uint32)
         rad = np.concatenate(rads) if rads else np.zeros((1, 3), dtype=np.float32)

@@ -49,7 +49,7 @@ from tracer.emitters import area, scene_emitters
 from tracer.geometry import Geometry, Hit, spawn_offset
 from tracer.materials.base import ShadingPoint
 from tracer.materials.dispatch import SceneMaterials
-from tracer.sampling import light_sample, pixel_samples
+from tracer.sampling import light_sample, pixel_samples, seed32
 from tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
@@ -137,8 +137,12 @@ class Integrator:
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
                  lpe: str | None = None, min_weight: float = 0.0):
         backend.use()
+        from tracer.limits import check_render
+
+        check_render(scene, moments=False)
         self.scene = scene
-        self.seed = seed
+        #: any integer; the streams use its 32-bit form (tracer.sampling.seed32)
+        self.seed = seed32(seed)
         #: Branches whose weight is at most this are dropped. 0 (exact Whitted) drops only
         #: zero-weight branches; a positive value is a biased speed-up.
         self.min_weight = float(min_weight)

@@ -17,6 +17,14 @@ construction. Each ray carries one DFA state; a vertex appends its letter by a
 table look-up, and light reaching the eye counts only if the state after the
 final ``L`` accepts. States from which no accepting state can be reached are
 dead: rays in them carry nothing the expression wants and are dropped.
+
+Size is bounded before any work: at most ``MAX_SYMBOLS`` symbols and
+``MAX_NESTING`` levels of parentheses, and at most ``WHITTED_LPE_MAX_STATES``
+DFA states (default 1000; tracer/limits.py). The subset construction can need
+2^n states for n symbols (``L.{n}D.*E``: the n-th letter from the end must be
+a D), so it stops and refuses the expression when it passes the limit; the
+NFA has at most 2 states per symbol (``+`` is its own node, never a copy of
+its operand), so the work per DFA state is bounded too.
 """
 
 from __future__ import annotations
@@ -27,9 +35,16 @@ from tracer.errors import UserError
 
 ALPHABET = "LDSE"
 SYMBOL = {c: i for i, c in enumerate(ALPHABET)}
+#: Longest expression (symbols, spaces not counted) and deepest nesting of parentheses.
+MAX_SYMBOLS = 200
+MAX_NESTING = 32
 
 
 # ---------------------------------------------------------------- parsing
+
+
+def _short(expr: str) -> str:
+    return repr(expr if len(expr) <= 60 else expr[:60] + "...")
 
 
 class LPEError(UserError):
@@ -41,6 +56,16 @@ def _parse(expr: str):
     text = expr.replace(" ", "")
     if not text:
         raise LPEError("empty light-path expression")
+    if len(text) > MAX_SYMBOLS:
+        raise LPEError(f"light-path expression of {len(text):,} symbols: at most "
+                       f"{MAX_SYMBOLS} are accepted")
+    depth = deepest = 0
+    for c in text:
+        depth += (c == "(") - (c == ")")
+        deepest = max(deepest, depth)
+    if deepest > MAX_NESTING:
+        raise LPEError(f"light-path expression nested {deepest} parentheses deep: at most "
+                       f"{MAX_NESTING} levels are accepted")
     pos = 0
 
     def peek():
@@ -49,7 +74,8 @@ def _parse(expr: str):
     def eat(c):
         nonlocal pos
         if peek() != c:
-            raise LPEError(f"light-path expression {expr!r}: expected {c!r} at position {pos}")
+            raise LPEError(f"light-path expression {_short(expr)}: expected {c!r} at "
+                           f"position {pos}")
         pos += 1
 
     def alt():
@@ -74,7 +100,7 @@ def _parse(expr: str):
             if op == "*":
                 node = ("star", node)
             elif op == "+":
-                node = ("cat", node, ("star", node))
+                node = ("plus", node)
             else:
                 node = ("alt", node, ("eps",))
         return node
@@ -90,11 +116,11 @@ def _parse(expr: str):
         if c == "[":
             end = text.find("]", pos)
             if end < 0:
-                raise LPEError(f"light-path expression {expr!r}: unclosed '['")
+                raise LPEError(f"light-path expression {_short(expr)}: unclosed '['")
             letters = set(text[pos + 1:end])
             bad = letters - set(ALPHABET)
             if bad or not letters:
-                raise LPEError(f"light-path expression {expr!r}: a class takes letters of "
+                raise LPEError(f"light-path expression {_short(expr)}: a class takes letters of "
                                f"{ALPHABET}, got [{text[pos + 1:end]}]")
             pos = end + 1
             return ("sym", frozenset(letters))
@@ -104,12 +130,12 @@ def _parse(expr: str):
         if c is not None and c in ALPHABET:
             pos += 1
             return ("sym", frozenset(c))
-        raise LPEError(f"light-path expression {expr!r}: unexpected {c!r} at position {pos} "
+        raise LPEError(f"light-path expression {_short(expr)}: unexpected {c!r} at position {pos} "
                        f"(use the letters {', '.join(ALPHABET)} and | * + ? ( ) [ ] .)")
 
     tree = alt()
     if pos != len(text):
-        raise LPEError(f"light-path expression {expr!r}: unexpected {text[pos]!r} at {pos}")
+        raise LPEError(f"light-path expression {_short(expr)}: unexpected {text[pos]!r} at {pos}")
     return tree
 
 
@@ -119,8 +145,8 @@ def _reverse(node):
         return ("cat", _reverse(node[2]), _reverse(node[1]))
     if kind == "alt":
         return ("alt", _reverse(node[1]), _reverse(node[2]))
-    if kind == "star":
-        return ("star", _reverse(node[1]))
+    if kind in ("star", "plus"):
+        return (kind, _reverse(node[1]))
     return node
 
 
@@ -157,9 +183,11 @@ def _nfa(tree):
                 edges[s].append((None, cs))
                 edges[ce].append((None, e))
             return s, e
-        s, e = new(), new()  # star
+        s, e = new(), new()  # star, or plus (which may not skip its operand)
         cs, ce = build(node[1])
-        edges[s] += [(None, cs), (None, e)]
+        edges[s].append((None, cs))
+        if kind == "star":
+            edges[s].append((None, e))
         edges[ce] += [(None, cs), (None, e)]
         return s, e
 
@@ -202,7 +230,13 @@ class DFA:
 
 
 def compile_lpe(expr: str) -> DFA:
-    """A DFA that reads paths from the eye (E ... L) and accepts those matching ``expr``."""
+    """A DFA that reads paths from the eye (E ... L) and accepts those matching ``expr``.
+
+    Raises :class:`LPEError` for a bad or too large expression (see the module doc).
+    """
+    from tracer.limits import LPE_MAX_STATES
+
+    max_states = LPE_MAX_STATES.value()
     start, accept, edges = _nfa(_reverse(_parse(expr)))
     dead = frozenset()
     index = {dead: 0}
@@ -218,6 +252,11 @@ def compile_lpe(expr: str) -> DFA:
         for c in ALPHABET:
             nxt = _closure({t for s in cur for d, t in edges[s] if d == c}, edges)
             if nxt not in index:
+                if len(order) >= max_states:
+                    raise LPEError(
+                        f"light-path expression {_short(expr)}: its automaton needs more than "
+                        f"{max_states:,} states (set WHITTED_LPE_MAX_STATES to change the "
+                        "limit)")
                 index[nxt] = len(order)
                 order.append(nxt)
                 trans.append([0] * len(ALPHABET))

@@ -15,9 +15,41 @@ from it, and the harness's deterministic reference on Mitsuba reads the very
 same numbers, so that both sides sample every area light at the same points.
 """
 
+import hashlib
+
 import drjit as dr
 
 from tracer.backend import jit
+
+
+def seed32(seed: int) -> int:
+    """Any integer seed as a 32-bit one: 0 .. 2^32 - 1 as they are, others hashed.
+
+    Seeds beyond 32 bits (negative ones, 2^40, ...) are hashed (BLAKE2b of
+    their decimal digits, the first 4 bytes) rather than wrapped, so that
+    2^32 + 7 draws other numbers than 7.
+    """
+    seed = int(seed)
+    if 0 <= seed < 1 << 32:
+        return seed
+    digest = hashlib.blake2b(str(seed).encode(), digest_size=4, person=b"whitted-seed")
+    return int.from_bytes(digest.digest(), "little")
+
+
+def mix32(*values: int) -> int:
+    """A 32-bit hash of a few non-negative integers (each < 2^32), on the CPU.
+
+    Used to derive one 32-bit dimension key from (seed, level, light) without
+    the collisions of packing them into bit fields; the same PCG permutation
+    as :func:`pcg_hash`, applied after each value is added.
+    """
+    h = 0x9E3779B9
+    for v in values:
+        h = (h ^ (int(v) & 0xFFFFFFFF)) & 0xFFFFFFFF
+        state = (h * 747796405 + 2891336453) & 0xFFFFFFFF
+        word = (((state >> ((state >> 28) + 4)) ^ state) * 277803737) & 0xFFFFFFFF
+        h = (word >> 22) ^ word
+    return h
 
 
 def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
@@ -81,6 +113,7 @@ def light_sample(pixel, s, n: int, seed: int, depth: int, light: int):
     render with another ``seed`` draws another set. Levels count from 1 (camera
     rays); lights are numbered in scene order among the emitting shapes.
     """
-    # Opaque: every level and light reuses one compiled kernel.
-    dimension = dr.opaque(jit.UInt32, (seed * 64 + depth) * 4096 + light)
+    # A hash, not bit fields, so that any 32-bit seed works (seed32 maps other integers);
+    # opaque, so that every level and light reuses one compiled kernel.
+    dimension = dr.opaque(jit.UInt32, mix32(seed32(seed), depth, light))
     return stratified_2d(pixel, s, n, dimension)

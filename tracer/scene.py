@@ -20,6 +20,7 @@ Two lines load and render a scene::
 from __future__ import annotations
 
 import math
+import os
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -38,7 +39,7 @@ from tracer.emitters.base import LightModel
 from tracer.emitters.directional import DirectionalLight as DirectionalLight
 from tracer.emitters.point import PointLight as PointLight
 from tracer.emitters.spot import SpotLight as SpotLight
-from tracer.errors import SceneError
+from tracer.errors import SceneError, UserError
 from tracer.materials.base import MaterialModel
 from tracer.materials.dielectric import Dielectric as Dielectric
 from tracer.materials.diffuse import Diffuse as Diffuse
@@ -357,6 +358,14 @@ class _Table:
         v = self.raw(key, default, "a list of 3 numbers")
         return _vec3(self, key, v, nonzero)
 
+    def direction(self, key: str, default: Any = ...) -> Vec3:
+        """A unit vector from a non-zero one (non-zero in float32)."""
+        return _unit(self, key, self.raw(key, default, "a list of 3 numbers"))
+
+    def distinct(self, key: str, a: Vec3, b: Vec3, other: str) -> None:
+        """Refuse b unless float32 tells it apart from a (see :func:`_distinct`)."""
+        _distinct(self, key, a, b, other)
+
     def color(self, key: str, default: Any = ..., hi: float | None = None) -> Color:
         what = "a colour: one number or a list of 3 numbers, each >= 0" + (
             f" and <= {hi}" if hi is not None else "")
@@ -371,6 +380,9 @@ class _Table:
                 self.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
             if x < 0 or (hi is not None and x > hi):
                 self.fail(key, f"expected {what}, got {_show(v)}")
+            if x > FLOAT32_MAX:
+                self.fail(key, f"expected {what}, within float32's range (up to "
+                               f"{FLOAT32_MAX:.4g}), got {_show(v)}")
             out.append(float(x))
         return (out[0], out[1], out[2])
 
@@ -386,15 +398,23 @@ class _Table:
             self.fail(unknown[0], f"unknown key (expected one of: {known}){allowed_note}")
 
 
-def _show(v: Any) -> str:
+def _show(v: Any, depth: int = 0) -> str:
+    """A value as the message shows it: strings escaped, long lists cut (a few elements)."""
     if isinstance(v, float) and math.isnan(v):
         return "nan"
     if isinstance(v, str):
-        return f'"{v}"'
+        text = v if len(v) <= 60 else v[:60] + "..."
+        return '"' + text.encode("unicode_escape").decode("ascii").replace('"', '\\"') + '"'
     if isinstance(v, dict):
         return "a table"
     if isinstance(v, bool):
         return "true" if v else "false"
+    if isinstance(v, list):
+        if depth >= 2:
+            return "[...]"
+        items = [_show(x, depth + 1) for x in v[:6]]
+        more = f", ... ({len(v):,} elements)" if len(v) > 6 else ""
+        return "[" + ", ".join(items) + more + "]"
     return repr(v)
 
 
@@ -407,30 +427,113 @@ def _range_text(base: str, lo, hi, lo_open, hi_open) -> str:
     return base + (" " + " and ".join(parts) if parts else "")
 
 
+#: The tracer computes in float32: the largest finite value and the smallest normal one.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+FLOAT32_TINY = float(np.finfo(np.float32).tiny)
+#: Largest coordinate (and inverse scale) of the world: intersection tests square
+#: coordinates and sum three squares, which must stay below FLOAT32_MAX (3 x 2^120 < 2^128).
+COORD_MAX = float(2.0**60)
+#: Largest ratio of a transform's largest to smallest scale (its condition number): float32
+#: round-trips a point through the transform and its inverse within about that many ulps.
+COND_MAX = 1e6
+
+
 def _check_number(t: _Table, key: str, v, what, lo, hi, lo_open, hi_open) -> float:
     if isinstance(v, bool) or not isinstance(v, (int, float)):
         t.fail(key, f"expected {what}, got {_show(v)}")
     if not math.isfinite(v):
         t.fail(key, f"expected a finite number ({what}), got {_show(v)}")
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        t.fail(key, f"expected {what}, got {v:g}")
-    if hi is not None and (v >= hi if hi_open else v > hi):
-        t.fail(key, f"expected {what}, got {v:g}")
+    if abs(v) > FLOAT32_MAX:
+        t.fail(key, f"expected {what} within float32's range (up to {FLOAT32_MAX:.4g}), "
+                    f"got {v:g}")
+    # The bounds must hold for the float32 value the tracer uses, too (1e-200 > 0 is 0).
+    v32 = float(np.float32(v))
+    for x in (v, v32):
+        if lo is not None and (x <= lo if lo_open else x < lo):
+            t.fail(key, f"expected {what}, got {v:g}" + (" (0 in float32)" if x == 0 != v
+                                                           else ""))
+        if hi is not None and (x >= hi if hi_open else x > hi):
+            t.fail(key, f"expected {what}, got {v:g}")
     return float(v)
 
 
 def _vec3(t: _Table, key: str, v, nonzero: bool = False) -> Vec3:
     what = "a list of 3 finite numbers"
     if not isinstance(v, list) or len(v) != 3:
-        got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
+        got = f"a list of {len(v):,}" if isinstance(v, list) else _show(v)
         t.fail(key, f"expected {what}, got {got}")
     for i, x in enumerate(v):
         if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
             t.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
+        if abs(x) > FLOAT32_MAX:
+            t.fail(key, f"expected numbers within float32's range (up to {FLOAT32_MAX:.4g}), "
+                        f"got {_show(v)}")
     out = (float(v[0]), float(v[1]), float(v[2]))
-    if nonzero and not any(out):
-        t.fail(key, "expected a non-zero vector, got [0, 0, 0]")
+    if nonzero and max(abs(x) for x in out) < FLOAT32_TINY:
+        t.fail(key, f"expected a non-zero vector, got {_show(v)} (zero in float32)")
     return out
+
+
+def _norm_or_1(v) -> float:
+    n = _norm(v)
+    return n if n > 0 else 1.0
+
+
+def _norm(v) -> float:
+    """Euclidean length without underflow or overflow (scaled by the largest component)."""
+    a = np.asarray(v, dtype=np.float64)
+    m = float(np.max(np.abs(a)))
+    return 0.0 if m == 0 else m * float(np.linalg.norm(a / m))
+
+
+def _unit(t: _Table, key: str, v) -> Vec3:
+    """A direction: non-zero in float32 (relative to nothing: any scale is a direction)."""
+    d = np.asarray(_vec3(t, key, v, nonzero=True))
+    d = d / np.max(np.abs(d))
+    d = d / np.linalg.norm(d)
+    return (float(d[0]), float(d[1]), float(d[2]))
+
+
+def _distinct(t: _Table, key: str, a, b, other: str) -> np.ndarray:
+    """b - a, refused unless float32 tells the two points apart with room to spare.
+
+    Relative test: the difference must exceed 2^-20 of the points' magnitude
+    (16 float32 ulps), so that the direction a -> b is known to about 1e-6.
+    """
+    d = np.subtract(b, a)
+    scale = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))))
+    if float(np.max(np.abs(d))) <= max(scale * 2.0**-20, FLOAT32_TINY):
+        t.fail(key, f"expected a point different from {other} "
+                    "(in float32 the two are the same or too close)")
+    return d
+
+
+def _check_extent(t: _Table, key: str, points, what: str = "coordinates") -> None:
+    """World coordinates within COORD_MAX, where float32 intersection tests stay finite."""
+    m = float(np.max(np.abs(points))) if np.size(points) else 0.0
+    if not m <= COORD_MAX:
+        t.fail(key, f"{what} reach {m:.3g}, beyond the {COORD_MAX:.3g} that float32 "
+                    "intersection tests can square")
+
+
+def _check_transform(t: _Table, key: str, m: np.ndarray, what: str = "transform") -> None:
+    """An affine transform float32 can apply and invert: relative tests on its scales.
+
+    Its singular values (the scales along its principal axes) must lie within
+    [1 / COORD_MAX, COORD_MAX] and their ratio (the condition number) within
+    COND_MAX; a NaN anywhere fails both. A uniform scale of 1e-5 passes, a
+    rotation about an axis that underflows, or [1, 1, 1e-12], does not.
+    """
+    if not np.isfinite(m).all():
+        t.fail(key, f"expected a finite {what} (it has NaN or infinite entries)")
+    _check_extent(t, key, m[:3, 3], "its translation")
+    sv = np.linalg.svd(m[:3, :3], compute_uv=False)
+    if not (sv[-1] > 0 and 1 / COORD_MAX <= sv[-1] and sv[0] <= COORD_MAX):
+        t.fail(key, f"expected an invertible {what} with scales between {1 / COORD_MAX:.3g} "
+                    f"and {COORD_MAX:.3g} (its scales range from {sv[-1]:.3g} to {sv[0]:.3g})")
+    if sv[0] / sv[-1] > COND_MAX:
+        t.fail(key, f"expected an invertible {what}: its scales range from {sv[-1]:.3g} to "
+                    f"{sv[0]:.3g}, a ratio beyond the {COND_MAX:.0g} float32 can invert")
 
 
 SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
@@ -449,11 +552,55 @@ TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "
 TRACER_ONLY = _materials.tracer_only_parts()
 
 
+#: Deepest nesting of tables and arrays a scene may use (the format needs five).
+MAX_NESTING = 16
+
+
+def _read_scene_bytes(path: str) -> bytes:
+    """The file's bytes: a regular file no larger than the limit (no FIFO, no device)."""
+    import stat
+
+    from tracer.limits import MAX_SCENE_BYTES, refuse
+
+    limit = MAX_SCENE_BYTES.value()
+    st = os.stat(path)
+    if stat.S_ISDIR(st.st_mode):
+        raise IsADirectoryError
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device"
+                if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "not a file")
+        raise SceneError(path, "", f"is {kind}, expected a regular file (a .toml scene)")
+    with open(path, "rb") as f:
+        data = f.read(limit + 1)  # a file may grow, or report a wrong size
+    if len(data) > limit:
+        try:
+            refuse(MAX_SCENE_BYTES, f"the scene file is larger than {limit:,} bytes",
+                   f"{limit:,}")
+        except UserError as e:
+            raise SceneError(path, "", str(e)) from None
+    return data
+
+
+def _check_nesting(path: str, data: Any) -> None:
+    """Refuse documents nested deeper than MAX_NESTING (walked without recursion)."""
+    stack = [(data, 0)]
+    while stack:
+        v, depth = stack.pop()
+        if depth > MAX_NESTING:
+            raise SceneError(path, "", f"tables and arrays nested more than {MAX_NESTING} "
+                                       "levels deep; a scene needs far fewer")
+        if isinstance(v, dict):
+            stack.extend((x, depth + 1) for x in v.values())
+        elif isinstance(v, list):
+            stack.extend((x, depth + 1) for x in v)
+
+
 def load_scene(path: str | Path) -> Scene:
     """Read and validate a TOML scene; raise :class:`SceneError` on bad input."""
     path = str(path)
     try:
-        text = Path(path).read_bytes().decode("utf-8")
+        text = _read_scene_bytes(path).decode("utf-8")
     except FileNotFoundError:
         raise SceneError(path, "", "no such scene file") from None
     except IsADirectoryError:
@@ -466,11 +613,15 @@ def load_scene(path: str | Path) -> Scene:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:
         raise SceneError(path, "", f"not valid TOML: {e}") from None
+    except RecursionError:
+        raise SceneError(path, "", f"tables and arrays nested too deeply to read (more than "
+                                   f"{MAX_NESTING} levels are refused anyway)") from None
     return parse_scene(data, path)
 
 
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     """Validate an already parsed TOML document (see :func:`load_scene`)."""
+    _check_nesting(path, data)
     top = _Table(path, "", data)
     description = top.string("description", "")
     film = _parse_film(top.table("film", {}))
@@ -529,10 +680,9 @@ def _parse_camera(t: _Table) -> Camera:
     kind = t.string("type", "perspective", CAMERA_TYPES)
     origin, target = t.vec3("origin"), t.vec3("target")
     up = t.vec3("up", [0.0, 1.0, 0.0], nonzero=True)
-    forward = np.subtract(target, origin)
-    if not np.any(forward):
-        t.fail("target", "expected a point different from camera.origin")
-    if np.linalg.norm(np.cross(forward, up)) <= 1e-9 * np.linalg.norm(forward) * np.linalg.norm(up):
+    forward = _distinct(t, "target", origin, target, "camera.origin")
+    f_unit, up_unit = forward / _norm(forward), np.asarray(up) / _norm(up)
+    if np.linalg.norm(np.cross(f_unit, up_unit)) <= 1e-6:
         t.fail("up", "expected a direction not parallel to target - origin")
     near = t.number("near_clip", 1e-2, lo=0, lo_open=True)
     far = t.number("far_clip", 1e4, lo=near, lo_open=True)
@@ -588,12 +738,13 @@ def _parse_steps(t: _Table, key: str) -> np.ndarray:
             if isinstance(v, (int, float)) and not isinstance(v, bool):
                 v = [v, v, v]
             sv = _vec3(s, "scale", v)
-            if any(x == 0 for x in sv):
-                s.fail("scale", f"expected non-zero scale factors, got {_show(list(sv))}")
+            if any(abs(x) < FLOAT32_TINY for x in sv):
+                s.fail("scale", f"expected non-zero scale factors, got {_show(v)} "
+                                "(a factor is zero in float32)")
             mats.append(tf.scale(sv))
         elif op == "rotate":
             r = s.table("rotate")
-            axis = r.vec3("axis", nonzero=True)
+            axis = _unit(r, "axis", r.raw("axis", ..., "a list of 3 numbers"))
             mats.append(tf.rotate(axis, r.number("angle")))
             r.finish()
         elif op == "matrix":
@@ -613,8 +764,7 @@ def _parse_steps(t: _Table, key: str) -> np.ndarray:
             s.fail(op, "unknown step (expected one of: translate, scale, rotate, matrix)")
         s.finish()
     m = tf.compose(mats)
-    if abs(np.linalg.det(m[:3, :3])) < 1e-12:
-        t.fail(key, "expected an invertible transform (its determinant is 0)")
+    _check_transform(t, key, m)
     return m
 
 
@@ -658,15 +808,18 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
         scale = float(np.linalg.norm(m[:3, 0]))
         shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
                        material, emitter, _as_tuple(m[:3, :3] / scale))
+        _check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
     elif kind == "rectangle":
         shape = Rectangle(_as_tuple(m), material, emitter)
     elif kind == "disk":
         shape = Disk(_as_tuple(m), material, emitter)
     elif kind == "triangle":
         verts = _points(t, "vertices", m, exactly=3)
-        if np.linalg.norm(np.cross(verts[1] - verts[0], verts[2] - verts[0])) == 0:
+        e1, e2 = verts[1] - verts[0], verts[2] - verts[0]
+        # Relative: the sine of the angle between the edges, as float32 can resolve it.
+        if not _norm(np.cross(e1 / _norm_or_1(e1), e2 / _norm_or_1(e2))) > 2.0**-23:
             t.fail("vertices", "expected a triangle with non-zero area "
-                               "(the vertices are collinear)")
+                               "(the vertices are collinear, or nearly so for float32)")
         shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
     elif kind == "polygon":
         verts = _points(t, "vertices", m)
@@ -674,10 +827,11 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
         shape = Polygon(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
     elif kind == "cylinder":
         p0, p1 = t.vec3("p0", [0.0, 0.0, 0.0]), t.vec3("p1", [0.0, 0.0, 1.0])
-        if p0 == p1:
-            t.fail("p1", "expected a point different from p0")
+        t.distinct("p1", p0, p1, "p0")
         shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), _as_tuple(m),
                          material, emitter)
+        _check_transform(t, "radius", shape.local_to_world(),
+                         "placement (radius against length)")
         lin = shape.local_to_world()[:3, :3]
         x, y, z = lin[:, 0], lin[:, 1], lin[:, 2]
         tol = 1e-6 * max(np.linalg.norm(x), np.linalg.norm(z))
@@ -691,6 +845,9 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
                            t.number("b", 1.0, lo=0, lo_open=True),
                            t.number("height", 1.0, lo=0, lo_open=True), _as_tuple(m),
                            material, emitter)
+        h = math.sqrt(shape.height)
+        _check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
+                         "shape (a, b and height against each other)")
     elif kind == "mesh":
         shape = _parse_mesh(t, m, material, emitter, base)
     else:
@@ -706,7 +863,9 @@ def _points(t: _Table, key: str, m: np.ndarray, exactly: int | None = None) -> l
     if not isinstance(v, list) or (len(v) != exactly if exactly else len(v) < 3):
         got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
         t.fail(key, f"expected {what}, got {got}")
-    return [tf.apply_point(m, _vec3(t, f"{key}[{i}]", p)) for i, p in enumerate(v)]
+    pts = [tf.apply_point(m, _vec3(t, f"{key}[{i}]", p)) for i, p in enumerate(v)]
+    _check_extent(t, key, np.asarray(pts), "vertices")
+    return pts
 
 
 def _check_polygon(t: _Table, verts: list) -> None:
@@ -742,6 +901,7 @@ def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh
     except MeshError as e:
         t.fail("file", str(e))
     verts = tf.apply_point(m, data.vertices)
+    _check_extent(t, "file", verts, "vertices")
     normals = None
     if smooth:
         if data.normals is not None:  # normals transform by the inverse transpose

@@ -11,8 +11,6 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-import numpy as np
-
 from tracer.backend import deferred
 from tracer.emitters import base
 
@@ -35,9 +33,7 @@ MODEL = DirectionalLight
 
 
 def parse(t: _Table) -> DirectionalLight:
-    d = np.asarray(t.vec3("direction", nonzero=True))
-    return DirectionalLight(tuple(float(x) for x in d / np.linalg.norm(d)),
-                            t.color("irradiance"))
+    return DirectionalLight(t.direction("direction"), t.color("irradiance"))
 
 
 class Emitter(base.Emitter):

@@ -45,8 +45,7 @@ MODEL = SpotLight
 
 def parse(t: _Table) -> SpotLight:
     position, target = t.vec3("position"), t.vec3("target")
-    if position == target:
-        t.fail("target", "expected a point different from position")
+    t.distinct("target", position, target, "position")
     cutoff = t.number("cutoff_angle", 20.0, lo=0, hi=180, lo_open=True, hi_open=True)
     beam = t.number("beam_width", 0.75 * cutoff, lo=0, hi=cutoff)
     return SpotLight(position, target, t.color("intensity"), cutoff, beam)

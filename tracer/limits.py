@@ -1,0 +1,151 @@
+"""Limits on the work and memory a job may take, checked before it starts.
+
+A render that cannot finish (more samples than 32-bit indices count, more
+memory than the machine has, a recursion a million levels deep) is refused at
+once, in one line that names the limit and the environment variable that
+changes it, rather than failing after minutes with a MemoryError, or being
+killed. Each limit has a default and an environment variable:
+
+========================  ============================  =================================
+variable                  default                       what it bounds
+========================  ============================  =================================
+WHITTED_MAX_SAMPLES       2^32 - 1                      camera samples of one render
+                                                        (width x height x spp), and
+                                                        samples of one Fresnel table
+WHITTED_MAX_MEMORY        half the machine's memory     estimated memory of one job
+WHITTED_MAX_DEPTH         1000                          max_depth (path segments)
+WHITTED_MAX_PRIMITIVES    2^31                          primitives, instances counted
+                                                        once per instance
+WHITTED_MAX_SCENE_BYTES   64 MiB                        size of a scene file
+WHITTED_LPE_MAX_STATES    1000                          states of a light-path automaton
+========================  ============================  =================================
+
+Sizes take the suffixes K, M, G, T (powers of 1024). The memory estimates
+are deliberately rough upper bounds, per sample and per pixel, of what the
+tracer's wavefront, its image buffers and Mitsuba's film hold; they decide
+only whether a job is refused, never how it runs.
+"""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+
+from tracer.errors import UserError
+
+_SUFFIX = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
+
+
+def _physical_memory() -> int:
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (ValueError, OSError, AttributeError):  # pragma: no cover (not POSIX)
+        return 8 << 30
+
+
+@dataclass(frozen=True)
+class Limit:
+    variable: str
+    default: int
+    what: str
+
+    def value(self) -> int:
+        """The limit in force: the environment variable if set (checked), else the default."""
+        text = os.environ.get(self.variable)
+        if text is None or not text.strip():
+            return self.default
+        t = text.strip().upper().removesuffix("B").removesuffix("I")
+        unit = t[-1] if t and t[-1] in _SUFFIX else ""
+        try:
+            v = int(float(t[:len(t) - len(unit)]) * _SUFFIX[unit])
+        except (ValueError, OverflowError):
+            v = 0
+        if v < 1:
+            raise UserError(f"{self.variable}={text[:40]!r}: expected a positive number "
+                            f"(suffixes K, M, G, T allowed)")
+        return v
+
+
+MAX_SAMPLES = Limit("WHITTED_MAX_SAMPLES", (1 << 32) - 1, "samples")
+MAX_MEMORY = Limit("WHITTED_MAX_MEMORY", _physical_memory() // 2, "")
+MAX_DEPTH = Limit("WHITTED_MAX_DEPTH", 1000, "max_depth")
+MAX_PRIMITIVES = Limit("WHITTED_MAX_PRIMITIVES", 1 << 31, "primitives")
+MAX_SCENE_BYTES = Limit("WHITTED_MAX_SCENE_BYTES", 64 << 20, "scene file size")
+LPE_MAX_STATES = Limit("WHITTED_LPE_MAX_STATES", 1000, "automaton states")
+
+#: Upper bounds of memory per sample in flight and per pixel (see the module docstring):
+#: the tracer's wavefront state over a recursion level (origins, directions, weights,
+#: indices, radiance, the next level's two children) is under 200 bytes per sample.
+TRACER_BYTES_PER_SAMPLE = 256
+#: Per pixel: the float32 image, its second moments, copies made to write it.
+BYTES_PER_PIXEL = 96
+#: Per primitive: its table rows, a BVH node share, material id and radiance.
+BYTES_PER_PRIMITIVE = 128
+#: Mitsuba renders the whole image as one wavefront: per sample, its sample state.
+MITSUBA_BYTES_PER_SAMPLE = 64
+#: A Fresnel-table sample: a surface interaction of Mitsuba's and numpy's inputs.
+FRESNEL_BYTES_PER_SAMPLE = 320
+#: Samples the tracer keeps in flight at once (the chunk size on a CPU; see integrator).
+CHUNK_SAMPLES = 1 << 21
+
+
+def _gib(n: float) -> str:
+    return f"{n / (1 << 30):.3g} GiB" if n >= 1 << 30 else f"{n / (1 << 20):.3g} MiB"
+
+
+def refuse(limit: Limit, needed: str, value_text: str | None = None) -> None:
+    """Raise the one-line refusal: what is needed, the limit, how to change it."""
+    lim = value_text or f"{limit.value():,}"
+    what = f" {limit.what}" if limit.what else ""
+    raise UserError(f"{needed}, beyond the limit of {lim}{what} "
+                    f"(set {limit.variable} to change it)")
+
+
+def check_samples(n: int, what: str) -> None:
+    if n > MAX_SAMPLES.value():
+        refuse(MAX_SAMPLES, f"{what} takes {n:,} samples")
+
+
+def check_memory(nbytes: float, what: str) -> None:
+    lim = MAX_MEMORY.value()
+    if nbytes > lim:
+        refuse(MAX_MEMORY, f"{what} needs about {_gib(nbytes)} of memory", _gib(lim))
+
+
+def check_depth(max_depth: int) -> None:
+    if max_depth > MAX_DEPTH.value():
+        refuse(MAX_DEPTH, f"max_depth {max_depth:,} is too deep")
+
+
+def primitive_count(scene) -> int:
+    """Primitives the tracer builds tables for: triangles of meshes, shapes, instances' copies."""
+    from tracer.scene import Instance, Mesh
+
+    def count(shapes) -> int:
+        return sum(len(s.faces) if isinstance(s, Mesh) else 1 for s in shapes
+                   if not isinstance(s, Instance))
+
+    per_group = {g: count(members) for g, members in scene.groups.items()}
+    return count(scene.shapes) + sum(per_group[s.group] for s in scene.shapes
+                                     if isinstance(s, Instance))
+
+
+def check_render(scene, moments: bool = False, mitsuba: bool = False) -> None:
+    """Refuse a render of ``scene`` (tracer, or with ``mitsuba`` Mitsuba's) that cannot finish."""
+    f = scene.film
+    spp = f.strata ** 2
+    pixels = f.width * f.height
+    what = f"a {f.width}x{f.height} render at {spp:,} spp"
+    check_depth(f.max_depth)
+    check_samples(pixels * spp, what)
+    prims = primitive_count(scene)
+    if prims > MAX_PRIMITIVES.value():
+        refuse(MAX_PRIMITIVES, f"the scene has {prims:,} primitives (instances counted "
+                               "once per instance)")
+    per_pixel = BYTES_PER_PIXEL * (2 if moments else 1)
+    nbytes = prims * BYTES_PER_PRIMITIVE
+    if mitsuba:
+        nbytes += pixels * per_pixel + pixels * spp * MITSUBA_BYTES_PER_SAMPLE
+    else:
+        nbytes += pixels * per_pixel + max(CHUNK_SAMPLES, spp) * TRACER_BYTES_PER_SAMPLE
+    check_memory(nbytes, what)
