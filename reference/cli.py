@@ -71,7 +71,20 @@ def load(args):
     from tracer import load_scene
 
     scene = load_scene(resolve_scene(args.scene))
-    return scene.with_overrides(spp=args.spp, max_depth=args.max_depth, size=args.size)
+    return scene.with_overrides(spp=args.spp, max_depth=_max_depth(args), size=args.size)
+
+
+def _max_depth(args) -> int | None:
+    """``--max-depth``, or ``--depth`` in Heckbert's numbering: max_depth = DEPTH + 1."""
+    depth = getattr(args, "depth", None)
+    if depth is None:
+        return args.max_depth
+    if args.max_depth is not None:
+        from tracer.errors import UserError
+
+        raise UserError("give either --depth (Heckbert's DEPTH) or --max-depth "
+                        "(= DEPTH + 1), not both")
+    return depth + 1
 
 
 def _note_spp(scene) -> None:
@@ -109,7 +122,8 @@ def _backend(args) -> str:
 
 def _describe(scene) -> str:
     f = scene.film
-    return f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth}"
+    return (f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth} "
+            f"(DEPTH {f.depth})")
 
 
 # ---------------------------------------------------------------- subcommands
@@ -354,7 +368,7 @@ def cmd_scenes(args) -> int:
 
     for p in builtin_scenes():
         s = load_scene(p)
-        print(f"{p.stem:<24} {_describe(s):<34} {s.description}")
+        print(f"{p.stem:<24} {_describe(s):<44} {s.description}")
     return EXIT_OK
 
 
@@ -378,6 +392,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--spp", type=_positive, help="samples per pixel (rounded up to a square)")
         sp.add_argument("--max-depth", type=_positive, dest="max_depth",
                         help="path segments, as Mitsuba counts them (2 = direct light)")
+        sp.add_argument("--depth", type=_positive, dest="depth",
+                        help="Heckbert's DEPTH: trace calls (1 = the camera rays' hits "
+                             "shaded); the same as --max-depth DEPTH+1")
         sp.add_argument("--size", type=_size, metavar="WxH", help="image size, e.g. 320x240")
         sp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                         help="Dr.Jit backend (default: WHITTED_BACKEND or auto: CUDA if "

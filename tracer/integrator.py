@@ -29,6 +29,13 @@ have a smooth part, mirrors and glass delta lobes).
 bounce. The recursion "illumination equation with recursion" of lecture 1 is
 exactly this sum, written level by level.
 
+Material emission (an ambient term, the glow of the classic model's light
+spheres) and a background that is a hit term are counted with the shading of
+a hit, for rays with depth < max_depth, so that max_depth = DEPTH + 1 is
+Heckbert's DEPTH exactly for the classic model (:mod:`tracer.emitters.base`).
+Rays of the last segment are traced only if they can add light there (an
+area light, or a background that is not a hit term).
+
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
 that grows beyond the chunk size is split and processed depth-first.
 """
@@ -152,8 +159,15 @@ class Integrator:
             self._letter = {c: i for i, c in enumerate(ALPHABET)}
         self.geo = Geometry(scene)
         self.materials = SceneMaterials(list(scene.materials.values()))
-        self.emitters = scene_emitters(scene.lights, self.geo.emitters)
+        self.emitters = scene_emitters(scene.lights, self.geo.emitters, scene.shape_lights())
         self.backgrounds = [e for e in self.emitters if e.infinite]
+        #: Lights sampled at shading points (a backdrop that is only seen is not).
+        self.illuminating = [e for e in self.emitters if e.illuminates]
+        #: Whether a ray of the last segment (depth == max_depth) can add anything: an area
+        #: light it hits, or a background that is not a hit term. If not, such rays are not
+        #: traced at all (Heckbert's DEPTH counts exactly the rays it traces).
+        self.last_level_sees = bool(self.geo.emitters) or any(
+            not e.hit_term for e in self.backgrounds)
         if chunk_samples is None:
             chunk_samples = (1 << 24) if backend.name() == "cuda" else (1 << 21)
         self.chunk_samples = chunk_samples
@@ -181,6 +195,8 @@ class Integrator:
             if self.dfa is not None:
                 missed &= self._accepts(self._step(b.state, "L"))
             for light in self.backgrounds:
+                if light.hit_term and depth >= max_depth:
+                    continue  # a hit term, counted only where rays are still shaded
                 contrib += dr.select(missed, b.weight * light.background(b.d), 0)
 
         children = None
@@ -206,7 +222,7 @@ class Integrator:
                     gate &= self._accepts(self._steps(b.state, letters))
                 contrib += dr.select(gate, b.weight * value, 0)
             if self.materials.has_smooth:
-                for light in self.emitters:
+                for light in self.illuminating:
                     u = None
                     if not light.delta:
                         u = stratified_2d(b.pixel, b.s, scene.film.strata,
@@ -223,7 +239,7 @@ class Integrator:
                     blocked = geo.occluded(origin, wi, tmax, active)
                     contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                     shadow_masks.append(active)
-            if self.materials.has_delta:
+            if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):
                 children = self._delta(b, mats, si, off)
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
