@@ -142,10 +142,15 @@ class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
-                 lpe: str | None = None, min_weight: float = 0.0):
+                 lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0):
         backend.use()
         self.scene = scene
         self.seed = seed
+        #: Scale of the distance new rays start off their surface (``spawn_offset``: 1024
+        #: float32 ulps of the position). Below 1 it trusts the intersection routines more
+        #: (spheres are accurate to a few ulps); a diagnostic, e.g. to show which of the
+        #: values that differ from a double-precision tracer come from this offset.
+        self.offset_scale = float(offset_scale)
         #: Branches whose weight is at most this are dropped. 0 (exact Whitted) drops only
         #: zero-weight branches; a positive value is a biased speed-up.
         self.min_weight = float(min_weight)
@@ -210,6 +215,8 @@ class Integrator:
             nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
             ng = dr.select(cos_o >= 0, n, -n)
             off = spawn_offset(p)
+            if self.offset_scale != 1.0:
+                off = off * self.offset_scale
             p_front = dr.fma(ng, off, p)
             si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
             mats = self.materials.at(mid, si, valid)

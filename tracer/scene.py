@@ -67,7 +67,7 @@ class Film:
 
     @property
     def depth(self) -> int:
-        """Heckbert's DEPTH (trace calls) of this max_depth: max_depth - 1 (docs/scene-format.md)."""
+        """Heckbert's DEPTH (trace calls): max_depth - 1 (docs/scene-format.md)."""
         return self.max_depth - 1
 
     @property

@@ -1,4 +1,4 @@
-"""Mitsuba conversion of ``background`` lights (tracer/emitters/background.py): ``whitted_background``.
+"""Mitsuba conversion of ``background`` (tracer/emitters/background.py): ``whitted_background``.
 
 Mitsuba's ``constant`` emitter is seen by escaping rays and also lights
 every shading point (its integrators sample it); the classic model's

@@ -1,4 +1,6 @@
-"""Mitsuba conversion of Heckbert's light spheres (tracer/emitters/heckbert.py): ``whitted_heckbert``.
+"""Mitsuba conversion of Heckbert's light spheres (tracer/emitters/heckbert.py).
+
+The emitter ``whitted_heckbert``.
 
 Mitsuba has no light that delivers a fixed value from the direction of a
 sphere's centre at any distance, so this emitter is written on Mitsuba's

@@ -1,4 +1,4 @@
-"""Mitsuba conversion of ``classic`` (tracer/materials/classic.py), and its BSDF ``whitted_classic``.
+"""Mitsuba conversion of ``classic`` (tracer/materials/classic.py): its BSDF ``whitted_classic``.
 
 Mitsuba 3 has no BSDF for the fixed-weight model of Whitted (1980) and
 Heckbert's minray (1987), so the harness renders the tracer's ``classic``
@@ -144,7 +144,6 @@ def _define(mi):
             p_t = 1 - p_d - p_r
             diffuse = sample1 < p_d
             reflect = ~diffuse & (sample1 < p_d + p_r)
-            transmit = ~diffuse & ~reflect
 
             side = dr.sign(mi.Frame3f.cos_theta(wi))
             cosine = mi.warp.square_to_cosine_hemisphere(sample2)
