@@ -222,11 +222,12 @@ class Integrator:
             mats = self.materials.at(mid, si, valid)
             lit = mats.smooth
             if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
-                lit &= self._accepts(self._steps(b.state, "DL"))
+                # Not &=: Dr.Jit updates in place, and lit may be a kind's own lane mask.
+                lit = lit & self._accepts(self._steps(b.state, "DL"))
             for mask, value, letters in mats.emission():
                 gate = mask
                 if self.dfa is not None:
-                    gate &= self._accepts(self._steps(b.state, letters))
+                    gate = gate & self._accepts(self._steps(b.state, letters))
                 contrib += dr.select(gate, b.weight * value, 0)
             if self.materials.has_smooth:
                 for light in self.illuminating:

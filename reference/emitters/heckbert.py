@@ -1,11 +1,9 @@
 """Mitsuba conversion of Heckbert's light spheres (tracer/emitters/heckbert.py).
 
-The emitter ``whitted_heckbert``.
-
 Mitsuba has no light that delivers a fixed value from the direction of a
-sphere's centre at any distance, so this emitter is written on Mitsuba's
-API and attached to the light sphere's shape (the harness attaches it where
-the tracer's material makes the light, :meth:`Classic.light_of
+sphere's centre at any distance, so this emitter, ``whitted_heckbert``, is
+written on Mitsuba's API and attached to the light sphere's shape (the
+harness attaches it where the tracer's material makes the light, :meth:`Classic.light_of
 <tracer.materials.classic.Classic.light_of>`). It plays both parts of a
 minray light:
 
