@@ -360,3 +360,45 @@ def summary(differences: list[Difference]) -> str:
         key = f"{d.cause or 'UNEXPLAINED'} at a {d.kind}"
         counts[key] = counts.get(key, 0) + 1
     return ", ".join(f"{n} {k}" for k, n in sorted(counts.items(), key=lambda kv: -kv[1]))
+
+
+# --------------------------------------------------------------------------- table
+
+def main(argv: list[str] | None = None) -> int:
+    """``python -m reference.minray``: the stored minray images against the tracer's.
+
+    For every image in ``tests/data/minray/`` (SIZE 32 and 256, DEPTH 1-5, 10,
+    20), render ``heckbert_minray`` at that size and DEPTH, and print how the
+    numbers agree and why the values more than one step apart differ.
+    """
+    import argparse
+    import re
+    from pathlib import Path
+
+    from reference.cli import SCENES_DIR
+    from tracer import load_scene
+    from tracer.imageio import ppm_values, read_ppm
+    from tracer.integrator import Integrator
+
+    data = Path(__file__).resolve().parent.parent / "tests" / "data" / "minray"
+    ap = argparse.ArgumentParser(prog="python -m reference.minray", description=main.__doc__)
+    ap.add_argument("--data", type=Path, default=data, help="folder of minray_SIZE_depthD.ppm[.gz]")
+    args = ap.parse_args(argv)
+    files = sorted(args.data.glob("minray_*_depth*.ppm*"),
+                   key=lambda p: tuple(int(x) for x in re.findall(r"\d+", p.name)[:2]))
+    base = load_scene(SCENES_DIR / "heckbert_minray.toml")
+    print(f"{'size':>5} {'DEPTH':>5} {'equal':>9} {'<=1 step':>9} {'max':>4} {'>1':>4}  why")
+    for f in files:
+        size, depth = (int(x) for x in re.findall(r"\d+", f.name)[:2])
+        s = base.with_overrides(size=(size, size), max_depth=depth + 1)
+        ours = ppm_values(Integrator(s).render().image)
+        theirs = read_ppm(f)
+        a = agreement(ours, theirs)
+        why = summary(explain(s, depth, theirs, ours))
+        print(f"{size:>5} {depth:>5} {100 * a.equal:>8.3f}% {100 * a.within_one:>8.3f}% "
+              f"{a.max_difference:>4} {a.beyond_one:>4}  {why}")
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
