@@ -298,6 +298,18 @@ TIGHT_OFFSETS = (1 / 64, 1 / 512)
 
 KINDS = {"outline": "silhouette", "shadow": "shadow edge", "tir": "critical angle"}
 
+#: float32 ulps within which a discontinuity cannot be placed without double precision: a
+#: hit point, a normal and a shadow ray's direction each take a few roundings of 2^-24
+#: relative to the scene's largest coordinate, and 16 ulps cover their sum.
+FLOAT_ULPS = 16
+
+
+def float_margin(scene) -> float:
+    """16 float32 ulps of the scene's extent (the largest |centre| + radius of its spheres)."""
+    sph = _spheres(scene)
+    extent = float(np.max(np.linalg.norm(sph.c, axis=1) + sph.r))
+    return FLOAT_ULPS * 2.0 ** -24 * (1 + extent)
+
 
 @dataclass
 class Difference:
@@ -309,7 +321,7 @@ class Difference:
     theirs: int
     kind: str          # the nearest discontinuity in minray's ray tree: silhouette, ...
     margin: float      # how near it passes (scene units; for a critical angle |1 - ...|)
-    cause: str | None  # "ray offset", or None: unexplained
+    cause: str | None  # "ray offset", "float precision", or None: unexplained
 
 
 def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = None
@@ -328,7 +340,10 @@ def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = Non
     step; ``kind`` names the discontinuity minray's tree passes nearest
     (:func:`decision_margins`): a ray passing a sphere's outline
     (silhouette), a shadow ray passing one (shadow edge), or a refraction at
-    the critical angle.
+    the critical angle. A value that even the smaller offsets do not bring to
+    minray's is explained as "float precision" when that discontinuity lies
+    within :func:`float_margin` (16 float32 ulps of the scene's extent; for a
+    critical angle 16 ulps of 1): float32 cannot tell on which side it lies.
     """
     from tracer.imageio import ppm_values
     from tracer.integrator import Integrator
@@ -340,14 +355,18 @@ def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = Non
         return []
     tight = [ppm_values(Integrator(scene, offset_scale=s).render().image) for s in TIGHT_OFFSETS]
     m = decision_margins(scene, depth)
+    limits = {"outline": float_margin(scene), "shadow": float_margin(scene),
+              "tir": FLOAT_ULPS * 2.0 ** -24}
     out = []
     for y, x, c in beyond:
         margins = {"outline": m.outline[y, x], "shadow": m.shadow[y, x], "tir": m.tir[y, x]}
         nearest = min(margins, key=margins.get)
         reproduced = any(abs(int(t[y, x, c]) - int(theirs[y, x, c])) <= 1 for t in tight)
+        cause = ("ray offset" if reproduced else "float precision"
+                 if any(margins[k] <= limits[k] for k in margins) else None)
         out.append(Difference(int(x), int(y), int(c), int(ours[y, x, c]),
                               int(theirs[y, x, c]), KINDS[nearest], float(margins[nearest]),
-                              "ray offset" if reproduced else None))
+                              cause))
     return out
 
 
