@@ -7,8 +7,9 @@ ray casts; only the loop is ours:
 
 * every emitter is sampled once per sample and shading point
   (``Emitter.sample_direction``, then ``Scene.ray_test`` for its shadow ray);
-* at a surface whose BSDF has a smooth (non-delta) lobe, the path ends after
-  that direct light: no indirect diffuse light, as in Whitted's model;
+* at a surface whose BSDF has a smooth (non-delta) lobe, direct light is
+  gathered there and the smooth lobe is never followed: no indirect diffuse
+  light, as in Whitted's model;
 * at a surface with delta lobes (``dielectric``, ``conductor``, and the
   delta part of a BSDF that also has a smooth one, such as the classic
   model's), the path continues with one delta lobe drawn by ``BSDF.sample``
