@@ -392,7 +392,7 @@ class _Hits:
         self.front_side = np.asarray(cos_o) > 0
 
     def f(self, wi: np.ndarray) -> np.ndarray:
-        """Luminance-free RGB f(wo, wi) of the smooth part, for directions wi (rows)."""
+        """RGB f(wo, wi) of the smooth part, for directions wi (rows)."""
         from tracer.backend import jit
 
         return np.asarray(self.closure.eval(jit.Array3f(*wi.T.astype(np.float32)))).T
@@ -473,7 +473,7 @@ def example_paths(scene, exprs=("LDDE", "LSDE"), candidates: int = 400,
     t2 = np.cross(nrm, t1)
     wd = local[:, :1] * t1 + local[:, 1:2] * t2 + local[:, 2:] * nrm
     # f(x) for each direction: the eye's closure evaluated per candidate, repeated.
-    fx = np.concatenate([eye_f for eye_f in _eval_repeated(eye, x_ok, wd, idx)])
+    fx = _eval_at(eye, x_ok, wd, idx)
     cos_x = np.einsum("ij,ij->i", wd, nrm)
     hits = _Hits(geo, materials, xfront[idx], wd)
     out: dict[str, Tree | None] = {}
@@ -550,8 +550,8 @@ def example_paths(scene, exprs=("LDDE", "LSDE"), candidates: int = 400,
     return out
 
 
-def _eval_repeated(eye: _Hits, keep: np.ndarray, wd: np.ndarray, idx: np.ndarray):
-    """f(x) of the eye hits ``keep`` for directions ``wd`` (one per row, x = idx)."""
+def _eval_at(eye: _Hits, keep: np.ndarray, wd: np.ndarray, idx: np.ndarray) -> np.ndarray:
+    """f(x) (RGB rows) of the eye hits ``keep`` for directions ``wd`` (one per row, x = idx)."""
     import drjit as dr
 
     from tracer.backend import jit
@@ -568,7 +568,7 @@ def _eval_repeated(eye: _Hits, keep: np.ndarray, wd: np.ndarray, idx: np.ndarray
     from tracer.materials.dispatch import Closure
 
     closure = Closure(parts, sub, dr.gather(jit.Bool, jit.Bool(eye.valid), take))
-    yield np.asarray(closure.eval(jit.Array3f(*wd.T.astype(np.float32)))).T
+    return np.asarray(closure.eval(jit.Array3f(*wd.T.astype(np.float32)))).T
 
 
 def _gather_tree(prm, take):
