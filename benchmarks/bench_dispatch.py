@@ -28,7 +28,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 SCENES = ("three_lights", "sphere_point", "phong_lobes", "shapes_zoo", "whitted_mix",
-          "heckbert_minray_hd", "whitted_1980", "mesh_knot", "area_lights")
+          "heckbert_physical_hd", "whitted_1980", "mesh_knot", "area_lights")
 #: the ShadingPoint fields, passed through dr.switch as arrays
 FIELDS = ("p", "n", "ns", "uv", "d", "nl", "ng", "cos_i")
 

@@ -75,7 +75,20 @@ def load(args):
     from tracer import load_scene
 
     scene = load_scene(resolve_scene(args.scene))
-    return scene.with_overrides(spp=args.spp, max_depth=args.max_depth, size=args.size)
+    return scene.with_overrides(spp=args.spp, max_depth=_max_depth(args), size=args.size)
+
+
+def _max_depth(args) -> int | None:
+    """``--max-depth``, or ``--depth`` in Heckbert's numbering: max_depth = DEPTH + 1."""
+    depth = getattr(args, "depth", None)
+    if depth is None:
+        return args.max_depth
+    if args.max_depth is not None:
+        from tracer.errors import UserError
+
+        raise UserError("give either --depth (Heckbert's DEPTH) or --max-depth "
+                        "(= DEPTH + 1), not both")
+    return depth + 1
 
 
 def check_finite(image, what: str = "the render") -> None:
@@ -134,7 +147,8 @@ def _backend(args) -> str:
 
 def _describe(scene) -> str:
     f = scene.film
-    return f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth}"
+    return (f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth} "
+            f"(DEPTH {f.depth})")
 
 
 # ---------------------------------------------------------------- subcommands
@@ -477,12 +491,34 @@ def cmd_paths(args) -> int:
     return EXIT_OK
 
 
+def cmd_assignment(args) -> int:
+    from reference.depth_sweep import parse_depths
+    from tracer.errors import UserError
+
+    depths = tuple(parse_depths(args.depths))
+    if max(depths) < 5:
+        raise UserError(f"--depths: expected a DEPTH of 5 or more (the assignment asks for "
+                        f"1 to 5 and 20+), got {args.depths!r}")
+    if args.repeat < 1:
+        raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
+    out = output_folder(args.output)
+    _backend(args)
+    from reference.assignment import run
+
+    print(f"whitted assignment: heckbert_minray at {args.size}x{args.size}, DEPTH "
+          f"{', '.join(map(str, depths))} -> {out}/", flush=True)
+    res = run(out, args.size, depths, args.repeat, mitsuba=not args.no_mitsuba,
+              log=lambda m: print(m, flush=True))
+    print("wrote " + ", ".join(f.name for f in res.files) + f" in {res.seconds:.0f} s")
+    return EXIT_OK
+
+
 def cmd_scenes(args) -> int:
     from tracer import load_scene
 
     for p in builtin_scenes():
         s = load_scene(p)
-        print(f"{p.stem:<24} {_describe(s):<34} {s.description}")
+        print(f"{p.stem:<24} {_describe(s):<44} {s.description}")
     return EXIT_OK
 
 
@@ -519,6 +555,9 @@ def build_parser() -> argparse.ArgumentParser:
         sp.add_argument("--spp", type=_positive, help="samples per pixel (rounded up to a square)")
         sp.add_argument("--max-depth", type=_positive, dest="max_depth",
                         help="path segments, as Mitsuba counts them (2 = direct light)")
+        sp.add_argument("--depth", type=_positive, dest="depth",
+                        help="Heckbert's DEPTH: trace calls (1 = the camera rays' hits "
+                             "shaded); the same as --max-depth DEPTH+1")
         sp.add_argument("--size", type=_size, metavar="WxH", help="image size, e.g. 320x240")
         sp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                         help="Dr.Jit backend (default: WHITTED_BACKEND or auto: CUDA if "
@@ -658,6 +697,27 @@ def build_parser() -> argparse.ArgumentParser:
     pa.add_argument("--no-mitsuba", action="store_true",
                     help="leave out the LDDE/LSDE panel rendered on Mitsuba")
     pa.set_defaults(func=cmd_paths)
+
+    a = sub.add_parser("assignment", help="the first lecture's assignment, in one run",
+                       description="Heckbert's business-card ray tracer assignment: "
+                                   "heckbert_depth1.png ... heckbert_depth5.png and a DEPTH "
+                                   "20+ image, heckbert_runtimes1.txt and .png (runtime and "
+                                   "rays against DEPTH, with the rays minray traces), "
+                                   "light_paths.png (LE, LDE, LSE, LDDE, LDSE, LSDE) and "
+                                   "observations.md, rendered with the classic model that "
+                                   "prints minray's numbers. About a minute at 256x256.")
+    a.add_argument("-o", "--output", required=True, help="output folder")
+    a.add_argument("--size", type=_positive, default=256,
+                   help="image width and height in pixels (default 256)")
+    a.add_argument("--depths", default="1-10,15,20",
+                   help="DEPTHs of the runtime sweep; the deepest also gets a picture "
+                        "(default 1-10,15,20)")
+    a.add_argument("--repeat", type=int, default=3, help="timed renders per DEPTH (default 3)")
+    a.add_argument("--no-mitsuba", action="store_true",
+                   help="leave out the LDDE/LSDE panel rendered with Mitsuba's path tracer")
+    a.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                   help="Dr.Jit backend")
+    a.set_defaults(func=cmd_assignment)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)

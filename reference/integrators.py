@@ -7,14 +7,21 @@ ray casts; only the loop is ours:
 
 * every emitter is sampled once per sample and shading point
   (``Emitter.sample_direction``, then ``Scene.ray_test`` for its shadow ray);
-* at a surface whose BSDF has a smooth (non-delta) lobe, the path ends after
-  that direct light: no indirect diffuse light, as in Whitted's model;
-* at a surface with only delta lobes (``dielectric``, ``conductor``), the
-  path continues with one lobe drawn by ``BSDF.sample`` (Mitsuba picks
-  reflection with probability R and refraction with 1 - R, so the weight
-  stays 1 up to the (n1/n2)^2 radiance scale); our tracer follows both lobes
-  instead, so the two agree in expectation;
-* area emitters hit by a camera or specular ray add their radiance;
+* at a surface whose BSDF has a smooth (non-delta) lobe, direct light is
+  gathered there and the smooth lobe is never followed: no indirect diffuse
+  light, as in Whitted's model;
+* at a surface with delta lobes (``dielectric``, ``conductor``, and the
+  delta part of a BSDF that also has a smooth one, such as the classic
+  model's), the path continues with one delta lobe drawn by ``BSDF.sample``
+  in a context that enables the delta lobes only (Mitsuba picks reflection
+  with probability R and refraction with 1 - R, so the weight stays 1 up to
+  the (n1/n2)^2 radiance scale); our tracer follows every lobe instead, so
+  the two agree in expectation;
+* area emitters hit by a camera or specular ray add their radiance; an
+  emitter whose Python object says ``hit_term = True`` (the classic model's
+  light spheres and backdrop, ``reference/emitters/``) only where the hit
+  would still be shaded (depth < max_depth), as the tracer counts hit terms
+  (``tracer/emitters/base.py``);
 * ``max_depth`` counts path segments as Mitsuba's other integrators do.
 
 With ``moments = true`` it also returns the per-sample second moment of each
@@ -81,7 +88,10 @@ class WhittedIntegrator(mi.SamplingIntegrator):
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
         ctx = mi.BSDFContext()
+        ctx_delta = mi.BSDFContext()   # the delta lobes only (see the module docstring)
+        ctx_delta.type_mask = +mi.BSDFFlags.Delta
         emitters = scene.emitters()
+        hit_terms = [mi.EmitterPtr(e) for e in emitters if getattr(e, "hit_term", False)]
         max_depth = self.max_depth
         rng = self._stream(sampler, ray)
 
@@ -90,8 +100,16 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         def body(ray, L, beta, depth, active, valid, rng, rand):
             si = scene.ray_intersect(ray, active)
             valid |= active & si.is_valid() & (depth == 0)
-            # Emitted radiance of an area light hit on its front side.
-            L += beta * si.emitter(scene).eval(si, active)
+            # Emitted radiance of an area light hit on its front side; a hit term only
+            # where the hit will be shaded.
+            emitter = si.emitter(scene)
+            seen = mi.Bool(active)
+            if hit_terms:
+                term = emitter == hit_terms[0]
+                for ptr in hit_terms[1:]:
+                    term |= emitter == ptr
+                seen &= ~term | (depth + 1 < max_depth)
+            L += beta * dr.select(seen, emitter.eval(si, seen), 0)
             depth += 1
             active &= si.is_valid() & (depth < max_depth)
 
@@ -109,11 +127,10 @@ class WhittedIntegrator(mi.SamplingIntegrator):
                 f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
                 L += dr.select(lit, beta * f * weight, 0)
 
-            delta = active & ~mi.has_flag(flags, mi.BSDFFlags.Smooth) & \
-                mi.has_flag(flags, mi.BSDFFlags.Delta)
+            delta = active & mi.has_flag(flags, mi.BSDFFlags.Delta)
             u1 = rng.next_float32(delta)
             u2 = mi.Point2f(rng.next_float32(delta), rng.next_float32(delta))
-            bs, bsdf_weight = bsdf.sample(ctx, si, u1, u2, delta)
+            bs, bsdf_weight = bsdf.sample(ctx_delta, si, u1, u2, delta)
             beta = dr.select(delta, beta * bsdf_weight, beta)
             # A lobe chosen with probability below 1: the other one was possible.
             rand |= delta & (bs.pdf > 0) & (bs.pdf < 1)

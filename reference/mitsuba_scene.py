@@ -27,6 +27,10 @@ instance + groups         ``shapegroup`` + ``instance``
 phong                     ``twosided`` ``whitted_phong`` (reference/materials/phong.py)
 checkerboard              ``checkerboard`` with ``to_uv`` a scale
 emitter                   ``area`` with ``radiance``
+classic                   ``whitted_classic`` (reference/materials/classic.py)
+classic with kl > 0       + ``whitted_heckbert`` on the sphere (reference/emitters/heckbert.py)
+background                ``whitted_background`` (reference/emitters/background.py)
+camera pixel_offset       ``principal_point_offset_x/y`` (perspective; orthographic: a shift)
 integrator                ``whitted`` (reference/integrators.py)
 ========================  ===================================================
 
@@ -73,12 +77,21 @@ def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
     cam, film = scene.camera, scene.film
     look = tf.look_at(cam.origin, cam.target, cam.up)
     sensor = {"near_clip": ("float", cam.near_clip), "far_clip": ("float", cam.far_clip)}
+    dx, dy = cam.pixel_offset
     if cam.type == "perspective":
         sensor.update(type="perspective", fov=("float", cam.fov), fov_axis=("string", "x"),
                       to_world=_matrix(look))
+        if dx or dy:  # moving the samples by (dx, dy) pixels = moving the principal point
+            sensor["principal_point_offset_x"] = ("float", dx / film.width)
+            sensor["principal_point_offset_y"] = ("float", dy / film.height)
     else:
+        half = cam.width / 2
+        # Mitsuba's camera space has +x to the image's left and +y to its top: moving
+        # the samples (dx, dy) pixels right and down moves the view by -2 dx / W, -2 dy / W
+        # of half its width there.
+        shift = tf.translate([-2 * dx / film.width * half, -2 * dy / film.width * half, 0])
         sensor.update(type="orthographic",
-                      to_world=_matrix(look @ tf.scale([cam.width / 2, cam.width / 2, 1])))
+                      to_world=_matrix(look @ shift @ tf.scale([half, half, 1])))
     sensor["film"] = {"type": "hdrfilm", "width": ("integer", film.width),
                       "height": ("integer", film.height), "rfilter": {"type": "box"},
                       "pixel_format": ("string", "rgb"),
@@ -186,9 +199,12 @@ def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape") -> dict:
                 "shapegroup": {"type": "ref", "id": ("string", f"group_{shape.group}")}}
     else:
         raise TypeError(f"no Mitsuba conversion for {type(shape).__name__}")
-    t["bsdf"] = bsdf_tree(scene.material_of(shape))
+    material = scene.material_of(shape)
+    t["bsdf"] = bsdf_tree(material)
     if shape.emitter is not None:
         t["emitter"] = area_tree(shape.emitter)
+    elif material is not None and (light := material.light_of(shape)) is not None:
+        t["emitter"] = emitter_tree(light)   # a light the material makes of its shape
     return t
 
 
@@ -386,13 +402,15 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> li
             tag = "emitter" if key.startswith("light_") else "shape"
         body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None,
                      mesh_prefix=mesh_prefix)
-    plugins = [name for name in plugin_names()
+    from reference.emitters import plugin_names as emitter_plugin_names
+
+    plugins = [name for name in plugin_names() + emitter_plugin_names()
                if any(f'type="{name}"' in line for line in body)]
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
             "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
             "--integrator direct for a stock integrator.") if integrator == "whitted" else ""
     if plugins:
-        note += (" It uses BSDFs written on Mitsuba's API (" +
+        note += (" It uses plugins written on Mitsuba's API (" +
                  ", ".join(f"`{name}`" for name in plugins) + "), registered by "
                  "reference.mitsuba().")
     header = [

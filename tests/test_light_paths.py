@@ -35,14 +35,19 @@ def test_bad_expressions_are_refused(bad):
         compile_lpe(bad)
 
 
-@pytest.mark.parametrize("name", ["whitted_mix", "area_lights", "heckbert_minray"])
+@pytest.mark.parametrize("name", ["whitted_mix", "area_lights", "heckbert_physical",
+                                  "heckbert_minray"])
 def test_a_partition_of_the_paths_sums_to_the_full_render(name):
     scene = load_scene(SCENES / f"{name}.toml").with_overrides(size=(48, 32), spp=4)
     full = render(scene).image
     parts = [render(scene, lpe=e).image for e in ("LE", "LS+E", "LDE", "LDS+E")]
     # Summation in a different order: float32 rounding of the per-sample sums only.
     assert np.allclose(sum(parts), full, rtol=1e-5, atol=1e-7)
-    assert np.array_equal(render(scene, lpe="L(D|S)*E").image, full)
+    # Every path a Whitted tracer makes: the full render, up to the order in which the
+    # rays of one sample that reach the same level add into its pixel (scatter-adds
+    # from parallel threads; measured on heckbert_minray: 1 ulp in a few pixels, and
+    # different from run to run).
+    assert np.allclose(render(scene, lpe="L(D|S)*E").image, full, rtol=1e-6, atol=0)
 
 
 def test_a_whitted_tracer_makes_no_ldde_or_lsde_paths():

@@ -19,6 +19,12 @@ Its bottom-left ray (u, v) = (0, 1) is f - tan r - tan/aspect up', its
 upper-right ray (1, 0) is f + tan r + tan/aspect up'. As in Mitsuba, the ray
 starts on the near plane (near_clip along f) and ends on the far plane.
 
+``pixel_offset`` (dx, dy) moves every film position by that many pixels
+before the mapping: (-0.5, -0.5) puts the one sample of a pixel on its
+upper-left corner, as Heckbert's minray does (its ray for pixel (x, y) goes
+through (x - W/2, W/2 / tan(fov/2), H/2 - y) on an image plane that spans
+the field of view, i.e. through film position (x, y)).
+
 Orthographic: all rays are parallel to f; the view is ``width`` wide in
 world units and width / aspect high, and a ray starts at
 origin + (2u - 1) width/2 r + (1 - 2v) width/2 / aspect up' + near_clip f.
@@ -50,6 +56,9 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
     """(origin, unit direction, tmax) of the rays through film positions (pixels)."""
     r, up, f = (_vec(x) for x in frame(camera))
     aspect = width / height
+    dx, dy = camera.pixel_offset
+    if dx or dy:
+        film_x, film_y = film_x + dx, film_y + dy
     sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
     sy = 1 - 2 * (film_y / height)         # +1 top .. -1 bottom
     eye = _vec(camera.origin)

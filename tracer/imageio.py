@@ -252,20 +252,81 @@ def _write_png_file(tmp: str, image) -> None:
     image.save(tmp, format="PNG")
 
 
+def ppm_values(image: np.ndarray) -> np.ndarray:
+    """The numbers minray prints for a linear image: 255 x value, rounded, no gamma, no clamp.
+
+    minray prints ``"%.0f"`` of 255 x the colour computed in double precision:
+    rounded to the nearest integer (exact ties to even, as C's printf and
+    Python's format both do), and values above 255 printed as they come (a
+    colour above 1 is not clamped). Negative values cannot come out of a
+    renderer; NaN and negative zero are written as 0.
+    """
+    v = np.maximum(np.nan_to_num(image.astype(np.float64), nan=0.0), 0.0) * 255.0
+    return np.rint(v).astype(np.int64)  # rint: round half to even, as "%.0f"
+
+
 def write_ppm(path: str | Path, image: np.ndarray) -> None:
     """Plain-text PPM with the pixel lines of Heckbert's minray.
 
     minray prints ``"%d %d\\n"`` (width, height) and then, per pixel, top row
-    first, ``"%.0f %.0f %.0f\\n"`` of 255 x the linear colour, without gamma.
-    The same lines are written here after the ``P3`` magic and a maxval of 255,
-    which make it a valid PPM; values are clipped to [0, 255].
+    first, ``"%.0f %.0f %.0f\\n"`` of 255 x the linear colour, without gamma
+    (:func:`ppm_values`). The same lines are written here after the ``P3``
+    magic and a maxval of 255, which make it a PPM (netpbm's plain format,
+    ``man 5 ppm``). Like minray, values above 255 are written as they are,
+    not clamped; netpbm's readers refuse such a file, :func:`read_ppm` reads
+    them back as written.
     """
     h, w, _ = image.shape
-    v = np.clip(np.nan_to_num(image) * 255.0, 0, 255)
+    v = ppm_values(image)
     lines = [f"P3\n{w} {h}\n255\n"]
-    lines += [f"{r:.0f} {g:.0f} {b:.0f}\n" for r, g, b in v.reshape(-1, 3)]
+    lines += [f"{r} {g} {b}\n" for r, g, b in v.reshape(-1, 3).tolist()]
     text = "".join(lines)
     _atomic_write(Path(path), lambda tmp: Path(tmp).write_text(text))
+
+
+def read_ppm(path: str | Path) -> np.ndarray:
+    """The numbers of a PPM file (H x W x 3 integers as written), plain P3 or binary P6.
+
+    A ``.gz`` file is decompressed first. Comments (``#`` to the end of a line)
+    may stand between the header's fields, as netpbm allows. Values above
+    maxval, which minray prints for colours above 1, are kept as written
+    rather than refused. Divide by the maxval (255) for linear colours.
+    """
+    import gzip
+
+    raw = Path(path).read_bytes()
+    if str(path).endswith(".gz"):
+        raw = gzip.decompress(raw)
+    fields: list[bytes] = []
+    pos = 0
+    while len(fields) < 4:  # magic, width, height, maxval
+        while pos < len(raw) and raw[pos:pos + 1].isspace():
+            pos += 1
+        if raw[pos:pos + 1] == b"#":
+            pos = raw.index(b"\n", pos) + 1 if b"\n" in raw[pos:] else len(raw)
+            continue
+        end = pos
+        while end < len(raw) and not raw[end:end + 1].isspace() and raw[end:end + 1] != b"#":
+            end += 1
+        if end == pos:
+            raise UserError(f"{path}: not a PPM file (header ends early)")
+        fields.append(raw[pos:end])
+        pos = end
+    magic = fields[0]
+    try:
+        w, h, maxval = (int(x) for x in fields[1:])
+    except ValueError:
+        raise UserError(f"{path}: not a PPM file (bad header)") from None
+    if magic == b"P6":
+        body = np.frombuffer(raw[pos + 1:], dtype=">u2" if maxval > 255 else np.uint8)
+    elif magic == b"P3":
+        text = b"\n".join(line.split(b"#")[0] for line in raw[pos:].splitlines())
+        body = np.array(text.split(), dtype=np.int64)
+    else:
+        raise UserError(f"{path}: not a PPM file (magic {magic[:2]!r}, expected P3 or P6)")
+    if body.size < w * h * 3:
+        raise UserError(f"{path}: {body.size} values, expected {w * h * 3} ({w} x {h} x 3)")
+    return body[:w * h * 3].astype(np.int64).reshape(h, w, 3)
 
 
 def write_image(path: str | Path, image: np.ndarray) -> None:

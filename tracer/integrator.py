@@ -29,6 +29,13 @@ have a smooth part, mirrors and glass delta lobes).
 bounce. The recursion "illumination equation with recursion" of lecture 1 is
 exactly this sum, written level by level.
 
+Material emission (an ambient term, the glow of the classic model's light
+spheres) and a background that is a hit term are counted with the shading of
+a hit, for rays with depth < max_depth, so that max_depth = DEPTH + 1 is
+Heckbert's DEPTH exactly for the classic model (:mod:`tracer.emitters.base`).
+Rays of the last segment are traced only if they can add light there (an
+area light, or a background that is not a hit term).
+
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
 that grows beyond the chunk size is split and processed depth-first.
 """
@@ -135,7 +142,7 @@ class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
-                 lpe: str | None = None, min_weight: float = 0.0):
+                 lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0):
         backend.use()
         from tracer.limits import check_render
 
@@ -143,6 +150,12 @@ class Integrator:
         self.scene = scene
         #: any integer; the streams use its 32-bit form (tracer.sampling.seed32)
         self.seed = seed32(seed)
+        #: Scale of the distance new rays start off their surface (``spawn_offset``: a
+        #: fixed number of float32 ulps of the position). Below 1 it trusts the
+        #: intersection routines more (spheres are accurate to a few ulps); a diagnostic,
+        #: e.g. to show which values that differ from a double-precision tracer come from
+        #: this offset.
+        self.offset_scale = float(offset_scale)
         #: Branches whose weight is at most this are dropped. 0 (exact Whitted) drops only
         #: zero-weight branches; a positive value is a biased speed-up.
         self.min_weight = float(min_weight)
@@ -156,8 +169,15 @@ class Integrator:
             self._letter = {c: i for i, c in enumerate(ALPHABET)}
         self.geo = Geometry(scene)
         self.materials = SceneMaterials(list(scene.materials.values()))
-        self.emitters = scene_emitters(scene.lights, self.geo.emitters)
+        self.emitters = scene_emitters(scene.lights, self.geo.emitters, scene.shape_lights())
         self.backgrounds = [e for e in self.emitters if e.infinite]
+        #: Lights sampled at shading points (a backdrop that is only seen is not).
+        self.illuminating = [e for e in self.emitters if e.illuminates]
+        #: Whether a ray of the last segment (depth == max_depth) can add anything: an area
+        #: light it hits, or a background that is not a hit term. If not, such rays are not
+        #: traced at all (Heckbert's DEPTH counts exactly the rays it traces).
+        self.last_level_sees = bool(self.geo.emitters) or any(
+            not e.hit_term for e in self.backgrounds)
         if chunk_samples is None:
             chunk_samples = (1 << 24) if backend.name() == "cuda" else (1 << 21)
         self.chunk_samples = chunk_samples
@@ -185,6 +205,8 @@ class Integrator:
             if self.dfa is not None:
                 missed &= self._accepts(self._step(b.state, "L"))
             for light in self.backgrounds:
+                if light.hit_term and depth >= max_depth:
+                    continue  # a hit term, counted only where rays are still shaded
                 contrib += dr.select(missed, b.weight * light.background(b.d), 0)
 
         children = None
@@ -198,19 +220,22 @@ class Integrator:
             nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
             ng = dr.select(cos_o >= 0, n, -n)
             off = spawn_offset(p)
+            if self.offset_scale != 1.0:
+                off = off * self.offset_scale
             p_front = dr.fma(ng, off, p)
             si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
             mats = self.materials.at(mid, si, valid)
             lit = mats.smooth
             if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
-                lit &= self._accepts(self._steps(b.state, "DL"))
+                # Not &=: Dr.Jit updates in place, and lit may be a kind's own lane mask.
+                lit = lit & self._accepts(self._steps(b.state, "DL"))
             for mask, value, letters in mats.emission():
                 gate = mask
                 if self.dfa is not None:
-                    gate &= self._accepts(self._steps(b.state, letters))
+                    gate = gate & self._accepts(self._steps(b.state, letters))
                 contrib += dr.select(gate, b.weight * value, 0)
             if self.materials.has_smooth:
-                for light in self.emitters:
+                for light in self.illuminating:
                     u = None
                     if not light.delta:
                         u = light_sample(b.pixel, b.s, scene.film.strata, self.seed, depth,
@@ -227,7 +252,7 @@ class Integrator:
                     blocked = geo.occluded(origin, wi, tmax, active)
                     contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                     shadow_masks.append(active)
-            if self.materials.has_delta:
+            if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):
                 children = self._delta(b, mats, si, off)
 
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)

@@ -10,6 +10,8 @@ directional light) and the incident quantity that multiplies BRDF x cos:
 * spot: I falloff(theta) / r^2, where falloff is Mitsuba's: 1 inside
   ``beam_width``, linear in the angle down to 0 at ``cutoff_angle``, 0 beyond;
 * directional: E, constant;
+* Heckbert's light sphere (the classic model): the value kl x colour from the
+  direction of the sphere's centre, the same at every distance (no falloff);
 * area lights: L cos(theta_l) / r^2 / pdf_area (a rectangle or triangle sampled
   uniformly by area), or L / pdf_solid_angle (a sphere sampled uniformly in
   the cone of directions it subtends), the two estimators of
@@ -57,6 +59,31 @@ def directional(p, direction, irradiance):
     """(wi, inf, E): light travelling along the unit ``direction``."""
     wi = -direction + dr.zeros(type(p), dr.width(p))
     return wi, dr.full(type(p.x), dr.inf, dr.width(p)), irradiance
+
+
+def sphere_centre(p, origin, center, radius, value):
+    """(wi, distance, value) of Heckbert's light sphere: towards its centre, no falloff.
+
+    Heckbert's business-card ray tracer (minray, 1987) and Whitted's model
+    (1980, I = Ia + kd sum_j (N . L_j) + ...) light a point by kl (N . L) with
+    L the unit direction to the light's centre, at any distance: the light
+    acts like a directional light aimed from the centre, of value kl x colour
+    (irradiance normal to L). It is seen when the first surface towards the
+    centre is the light sphere itself, so the shadow ray from ``origin`` ends
+    where it meets the sphere (the nearer root of the ray-sphere quadratic):
+    anything before that shadows the point. A point inside the sphere gets
+    nothing.
+    """
+    to_c = center - p
+    dc = dr.norm(to_c)
+    wi = to_c / dc
+    f = origin - center
+    b = dr.dot(f, wi)
+    disc = radius * radius - dr.squared_norm(f - b * wi)
+    # The near root -b - sqrt(disc); where rounding leaves no root (a grazing
+    # origin), the distance to the tangent point.
+    dist = -b - dr.sqrt(dr.maximum(disc, 0))
+    return wi, dist, dr.select(dc > radius, value, 0)
 
 
 def lambert_cosine(n, wi):

@@ -67,6 +67,11 @@ class Film:
     max_depth: int = 6
 
     @property
+    def depth(self) -> int:
+        """Heckbert's DEPTH (trace calls): max_depth - 1 (docs/scene-format.md)."""
+        return self.max_depth - 1
+
+    @property
     def strata(self) -> int:
         """Strata per pixel side: spp is rounded up to a square, as Mitsuba's sampler does."""
         n = math.isqrt(self.spp)
@@ -83,6 +88,9 @@ class Camera:
     width: float = 2.0          # orthographic: world-space width of the view
     near_clip: float = 1e-2     # Mitsuba's defaults, so both sides clip alike
     far_clip: float = 1e4
+    #: where each pixel's grid of samples sits, in pixels from its usual place: (-0.5, -0.5)
+    #: puts a single sample on the pixel's upper-left corner, as Heckbert's minray does
+    pixel_offset: tuple[float, float] = (0.0, 0.0)
 
     def to_world(self) -> np.ndarray:
         return tf.look_at(self.origin, self.target, self.up)
@@ -271,6 +279,20 @@ class Scene:
     def has_specular(self) -> bool:
         """Some material in use has delta lobes (mirror reflection, refraction)."""
         return any(_materials.module_of(m).BSDF.lobes for m in self.used_materials())
+
+    def shape_lights(self) -> tuple:
+        """Lights that materials make of the shapes carrying them (Heckbert's light spheres).
+
+        See :meth:`tracer.materials.base.MaterialModel.light_of`; the parser has
+        already refused shapes a material cannot make a light of.
+        """
+        out = []
+        for s in self.shapes:
+            m = self.material_of(s)
+            light = None if m is None else m.light_of(s)
+            if light is not None:
+                out.append(light)
+        return tuple(out)
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
@@ -669,9 +691,15 @@ def _array_of_tables(top: _Table, key: str) -> list[_Table]:
 
 def _parse_film(t: _Table) -> Film:
     d = Film()
+    if t.has("depth") and t.has("max_depth"):
+        t.fail("depth", "give either depth (Heckbert's DEPTH) or max_depth (= depth + 1), "
+                        "not both")
+    if t.has("depth"):  # Heckbert's DEPTH: trace calls (docs/scene-format.md)
+        max_depth = t.integer("depth", lo=1) + 1
+    else:
+        max_depth = t.integer("max_depth", d.max_depth, lo=1)
     film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
-                spp=t.integer("spp", d.spp, lo=1),
-                max_depth=t.integer("max_depth", d.max_depth, lo=1))
+                spp=t.integer("spp", d.spp, lo=1), max_depth=max_depth)
     t.finish()
     return film
 
@@ -686,17 +714,30 @@ def _parse_camera(t: _Table) -> Camera:
         t.fail("up", "expected a direction not parallel to target - origin")
     near = t.number("near_clip", 1e-2, lo=0, lo_open=True)
     far = t.number("far_clip", 1e4, lo=near, lo_open=True)
+    offset = _pixel_offset(t)
     if kind == "perspective":
         cam = Camera("perspective", origin, target, up,
                      fov=t.number("fov", 45.0, lo=0, hi=180, lo_open=True, hi_open=True),
-                     near_clip=near, far_clip=far)
+                     near_clip=near, far_clip=far, pixel_offset=offset)
         note = " (width is for orthographic cameras)" if t.has("width") else ""
     else:
         cam = Camera("orthographic", origin, target, up,
-                     width=t.number("width", lo=0, lo_open=True), near_clip=near, far_clip=far)
+                     width=t.number("width", lo=0, lo_open=True), near_clip=near, far_clip=far,
+                     pixel_offset=offset)
         note = " (fov is for perspective cameras)" if t.has("fov") else ""
     t.finish(note)
     return cam
+
+
+def _pixel_offset(t: _Table) -> tuple[float, float]:
+    """``pixel_offset = [dx, dy]``: the pixel grid's samples moved by (dx, dy) pixels."""
+    what = "[dx, dy]: two numbers from -1 to 1 (pixels)"
+    v = t.raw("pixel_offset", [0.0, 0.0], what)
+    if (not isinstance(v, list) or len(v) != 2 or
+            any(isinstance(x, bool) or not isinstance(x, (int, float)) or
+                not math.isfinite(x) or abs(x) > 1 for x in v)):
+        t.fail("pixel_offset", f"expected {what}, got {_show(v)}")
+    return (float(v[0]), float(v[1]))
 
 
 #: A colour, or ``{ checkerboard = {...} }`` (tracer/materials/textures.py).
@@ -852,6 +893,14 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
         shape = _parse_mesh(t, m, material, emitter, base)
     else:
         shape = Instance(group, _as_tuple(m))
+    if material is not None:  # a material may make a light of its shape (light_of)
+        try:
+            light = materials[material].light_of(shape)
+        except ValueError as e:
+            t.fail("material", str(e))
+        if light is not None and in_group:
+            t.fail("material", f'material "{material}" makes a light of its shape, and '
+                               "lights cannot be instanced (use it outside groups)")
     t.finish()
     return shape
 

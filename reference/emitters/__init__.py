@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.emitters import area, directional, point, spot
+from reference.emitters import area, background, directional, heckbert, point, spot
 from tracer.emitters import type_of
 from tracer.errors import UserError
 
@@ -20,6 +20,9 @@ REGISTRY: dict[str, ModuleType] = {
     "point": point,
     "directional": directional,
     "spot": spot,
+    "background": background,
+    # made by materials of their shapes (tracer.emitters.SHAPE_LIGHTS), attached to the shape
+    "heckbert": heckbert,
 }
 
 
@@ -40,6 +43,11 @@ def emitter_tree(light) -> dict:
 def area_tree(emitter) -> dict:
     """The Mitsuba emitter of a shape's area emitter."""
     return area.mitsuba(emitter)
+
+
+def plugin_names() -> tuple[str, ...]:
+    """The names of the emitters :func:`register_plugins` registers."""
+    return tuple(name for m in REGISTRY.values() for name in getattr(m, "PLUGINS", ()))
 
 
 def register_plugins(mi) -> None:

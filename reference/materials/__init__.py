@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.materials import dielectric, diffuse, mirror, phong
+from reference.materials import classic, dielectric, diffuse, mirror, phong
 from reference.mitsuba_tree import rgb
 from tracer.errors import UserError
 from tracer.materials import type_of
@@ -29,6 +29,7 @@ REGISTRY: dict[str, ModuleType] = {
     "mirror": mirror,
     "dielectric": dielectric,
     "phong": phong,
+    "classic": classic,
 }
 
 #: "No material" (a shape that only emits): black from both sides.

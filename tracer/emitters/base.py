@@ -11,8 +11,30 @@ tracer needs:
   "Light attenuation"; for area lights an estimator of integral L d(omega));
 * :meth:`Emitter.background`: for a light at infinity (``infinite``), the
   radiance a ray that escapes the scene brings back;
+* :attr:`Emitter.illuminates`: whether shading points sample it at all (a
+  backdrop that is only seen does not);
+* :attr:`Emitter.hit_term`: whether what it adds where a ray meets it is
+  counted as a hit term (see below);
 * area emitters on shapes also emit where a ray hits their front side
   (:func:`tracer.emitters.area.emitted`).
+
+**Hit terms and depth.** ``max_depth`` counts path segments as Mitsuba does:
+light seen by the ray of segment k (an area light hit, an environment an
+escaping ray sees) counts while k <= max_depth, light arriving at its hit
+through a shadow ray only while k < max_depth. The classic model (Whitted
+1980, Heckbert's minray 1987) counts trace calls instead: everything a trace
+call returns is decided at its ray's hit (emission, ambient, direct light)
+or, for a ray that hits nothing, is the background. Such *hit terms* are
+counted like direct light, for rays with k < max_depth: a material's
+emission (:meth:`tracer.materials.base.BSDF.emission_terms`) always is, and a
+background is when its emitter sets ``hit_term``. Then max_depth = DEPTH + 1
+is exactly Heckbert's DEPTH.
+
+**Lights made by materials.** A material may make a light of a shape that
+carries it (:meth:`tracer.materials.base.MaterialModel.light_of`: the classic
+model's spheres with kl > 0 are Heckbert's light spheres); such light kinds
+are registered in :data:`tracer.emitters.SHAPE_LIGHTS` rather than as
+``[[lights]]`` kinds.
 
 A ``[[lights]]`` kind is one module of :mod:`tracer.emitters` holding its
 scene-model dataclass (a :class:`LightModel`), ``parse(table)`` and
@@ -39,6 +61,11 @@ class Emitter:
     delta: ClassVar[bool] = True
     #: At infinity: rays that escape the scene bring back :meth:`background`.
     infinite: ClassVar[bool] = False
+    #: Shading points sample it (:meth:`sample`); False for a backdrop that is only seen.
+    illuminates: ClassVar[bool] = True
+    #: What it adds where a ray meets it (its :meth:`background`) is a hit term, counted
+    #: only for rays that are still shaded (depth < max_depth; see the module docstring).
+    hit_term: ClassVar[bool] = False
     #: The sample ``u`` that lands in the middle of the light (the ray trees aim there).
     aim: tuple[float, float] = (0.5, 0.5)
     #: Place among the scene's sampled (not delta) lights: chooses its random stream.

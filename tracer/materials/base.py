@@ -16,7 +16,14 @@ three questions at a hit:
     recursively (a mirror's reflection; glass's reflection with Fresnel R and
     refraction with (1 - R)(n1 / n2)^2: the S of the notation);
 (c) **emission**: radiance added at the hit without any light sample (the
-    lecture's ambient term of the Phong model).
+    lecture's ambient term of the Phong model; the classic model's ambient
+    term and the glow kl x colour of its light spheres). Emission is a *hit
+    term*: it is counted with the shading of the hit, for rays with
+    depth < max_depth (see :mod:`tracer.emitters.base`).
+
+A material may also make a light source of a shape that carries it
+(:meth:`MaterialModel.light_of`), as the classic model's spheres with
+kl > 0 are Heckbert's light spheres.
 
 A kind is one module of :mod:`tracer.materials` holding three things: its
 scene-model dataclass (a :class:`MaterialModel`), ``parse(table, name)``
@@ -63,6 +70,17 @@ class MaterialModel:
     def textures(self) -> tuple:
         """The textures among its parameters (colours or texture models)."""
         return ()
+
+    def light_of(self, shape) -> Any:
+        """The light source this material makes of ``shape``, which carries it, or None.
+
+        Most kinds make none. A kind that does returns the model of a light kind
+        registered in :data:`tracer.emitters.SHAPE_LIGHTS` (the classic model's
+        spheres with kl > 0: Heckbert's light spheres), and raises ``ValueError``
+        with a one-line reason for a shape it cannot make a light of; the scene
+        is then refused.
+        """
+        return None
 
 
 @dataclass
@@ -146,6 +164,16 @@ class BSDF:
     def emission(self, prm, si: ShadingPoint):
         """Radiance added at the hit (Array3f), or None."""
         return None
+
+    def emission_terms(self, prm, si: ShadingPoint) -> list[tuple[Any, str]]:
+        """Each term of radiance added at the hit: (Array3f, light-path letters).
+
+        By default the one term of :meth:`emission` with :attr:`emission_letters`.
+        A kind that adds terms of different origin overrides this (the classic
+        model: its ambient term, ``"DL"``, and the glow of a light sphere, ``"L"``).
+        """
+        value = self.emission(prm, si)
+        return [] if value is None else [(value, self.emission_letters)]
 
 
 # --------------------------------------------------------------------------- tables

@@ -74,9 +74,8 @@ class Closure:
         out = []
         for bsdf, mask, prm in self.parts:
             if bsdf.emits:
-                value = bsdf.emission(prm, self.si)
-                if value is not None:
-                    out.append((mask, value, bsdf.emission_letters))
+                out += [(mask, value, letters)
+                        for value, letters in bsdf.emission_terms(prm, self.si)]
         return out
 
     def delta_lobes(self, throughput) -> list[Slot]:
