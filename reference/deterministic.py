@@ -8,27 +8,35 @@ call into Mitsuba 3's Python API and nothing is the tracer's code:
 
 * camera rays: ``Sensor.sample_ray`` at exactly the tracer's film positions
   (the centres of an n x n grid of strata in each pixel);
-* hits: ``Scene.ray_intersect``; emitted radiance of an area light hit on its
-  front side: ``SurfaceInteraction3f.emitter(scene).eval``;
+* hits: ``Scene.ray_intersect``; the light a ray sees where it meets an
+  emitter (an area light's front side, the environment where it misses),
+  ``SurfaceInteraction3f.emitter(scene).eval``, hit terms (the classic
+  model's glow and backdrop) only where the hit is still shaded;
 * at a hit whose BSDF has a smooth lobe (Mitsuba's ``BSDFFlags.Smooth``), direct
   light from every emitter: ``Emitter.sample_direction``, ``Scene.ray_test``
-  for the shadow ray, ``BSDF.eval``; the path ends there (Whitted's model has
-  no indirect diffuse light);
-* at a hit whose BSDF has a delta lobe, each delta lobe is followed: for
-  ``DeltaReflection`` and ``DeltaTransmission`` in turn, ``BSDF.sample`` with a
-  ``BSDFContext`` whose ``type_mask`` keeps that lobe alone. Mitsuba's
-  ``dielectric`` then returns the lobe with probability 1 and weight R (or
-  1 - R times the (n1/n2)^2 radiance scale, which is 0 under total internal
-  reflection), and ``conductor`` its reflectance times its Fresnel term
-  (src/bsdfs/dielectric.cpp and conductor.cpp, Mitsuba 3.9.1: with one of the
-  two lobes enabled, ``weight = has_reflection ? r_i : t_i``, ``pdf = 1``;
-  ``twosided`` passes the context on to the side the ray arrives from);
-* ``max_depth`` counts path segments, as in Mitsuba and the tracer.
+  for the shadow ray, ``BSDF.eval``; the smooth lobe is never followed
+  (Whitted's model has no indirect diffuse light);
+* at a hit whose BSDF has a delta lobe, smooth part or not, each delta lobe
+  is followed: for ``DeltaReflection`` and ``DeltaTransmission`` in turn,
+  ``BSDF.sample`` with a ``BSDFContext`` whose ``type_mask`` keeps that lobe
+  alone. Mitsuba's ``dielectric`` then returns the lobe with probability 1
+  and weight R (or 1 - R times the (n1/n2)^2 radiance scale, which is 0
+  under total internal reflection), and ``conductor`` its reflectance times
+  its Fresnel term (src/bsdfs/dielectric.cpp and conductor.cpp, Mitsuba
+  3.9.1: with one of the two lobes enabled, ``weight = has_reflection ? r_i
+  : t_i``, ``pdf = 1``; ``twosided`` passes the context on to the side the
+  ray arrives from); ``whitted_classic`` its fixed weight ks or kt;
+* ``max_depth`` counts path segments, as in Mitsuba and the tracer, and rays
+  of the last segment are traced only where they can meet an emitter that is
+  not a hit term, as in the tracer.
 
+What a hit adds and which rays it spawns is :mod:`reference.shading`, the
+same code as the one-lobe integrator's (:mod:`reference.integrators`).
 Which lobes exist comes from the BSDF's flags, never from the material's kind:
 a new Mitsuba BSDF with delta or smooth lobes needs no change here.
 
-Area lights. Point, spot and directional emitters need no sample. An area
+Area lights. Delta emitters (point, spot, directional, Heckbert's light
+spheres) need no sample. An area
 light is sampled at the tracer's own points: both sides read
 :func:`tracer.sampling.light_sample` (the same pixel, sample index, level,
 light and seed), and each shape's 2D sample is mapped to the sample for
@@ -51,6 +59,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
+from reference.shading import Terms
 from tracer.backend import jit
 from tracer.sampling import light_sample, pixel_samples
 from tracer.scene import Disk, Rectangle, Scene, Sphere, Triangle
@@ -105,12 +114,20 @@ class _Light:
 
 
 def _lights(scene: Scene, ms, mi) -> list[_Light]:
-    """Mitsuba's emitters, each with the tracer's area-light number and its sample map."""
+    """Mitsuba's emitters, each with the tracer's area-light number and its sample map.
+
+    Which emitters take a sample comes from Mitsuba's flags: a delta emitter
+    (a point, spot or directional light, or Heckbert's light sphere, which is
+    attached to its shape but lights towards its centre) ignores it; an
+    emitter on a shape that is not delta is an area light, sampled at the
+    tracer's points of the same light. Others (an environment that lights
+    nothing) are handed any sample.
+    """
     emitting = [i for i, s in enumerate(scene.shapes) if s.emitter is not None]
     out = []
     for e in ms.emitters():
         shape = e.get_shape()
-        if shape is None:
+        if shape is None or mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             out.append(_Light(e, None, None))
             continue
         k = int(shape.id().removeprefix("shape_"))
@@ -142,24 +159,19 @@ class DeterministicReference:
         self.ms = load(scene, mi)
         self.sensor = self.ms.sensors()[0]
         self.lights = _lights(scene, self.ms, mi)
-        self.lobes = []
-        for flag in (mi.BSDFFlags.DeltaReflection, mi.BSDFFlags.DeltaTransmission):
-            ctx = mi.BSDFContext()
-            ctx.type_mask = flag
-            self.lobes.append((flag, ctx))
+        self.terms = Terms(mi, self.ms, scene.film.max_depth)
 
     def _level(self, ray, beta, pixel, s, slot, depth: int, L):
-        """Trace one level; add its light to L; return the next level's rays."""
-        mi, ms, scene = self.mi, self.ms, self.scene
+        """Trace the rays of path segment ``depth``; add their light to L; return the
+        next segment's rays."""
+        mi, ms, scene, terms = self.mi, self.ms, self.scene, self.terms
         si = ms.ray_intersect(ray)
         valid = si.is_valid()
-        contrib = beta * si.emitter(ms).eval(si, valid)
+        contrib = beta * terms.emitted(si, True, depth)
         children = []
-        if depth < scene.film.max_depth:
+        if terms.shaded(depth):
             bsdf = si.bsdf(ray)
-            flags = bsdf.flags()
-            ctx = mi.BSDFContext()
-            smooth = valid & mi.has_flag(flags, mi.BSDFFlags.Smooth)
+            smooth, delta = terms.follows(bsdf.flags(), valid)
             for light in self.lights:
                 if light.index is None:
                     u = mi.Point2f(0.5, 0.5)  # a delta emitter ignores its sample
@@ -167,17 +179,15 @@ class DeterministicReference:
                     t = light_sample(jit.UInt32(pixel), jit.UInt32(s), scene.film.strata,
                                      self.seed, depth, light.index)
                     u = light.sample_map(mi.Point2f(t), mi)
-                ds, weight = light.emitter.sample_direction(si, u, smooth)
-                lit = smooth & (ds.pdf != 0) & (dr.max(weight) > 0)
-                lit &= ~ms.ray_test(si.spawn_ray_to(ds.p), lit)
-                f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
-                contrib += dr.select(lit, beta * f * weight, 0)
-            for flag, lobe_ctx in self.lobes:
-                follow = valid & mi.has_flag(flags, flag)
-                bs, weight = bsdf.sample(lobe_ctx, si, 0.5, mi.Point2f(0.5, 0.5), follow)
-                w = beta * weight
-                keep = follow & (bs.pdf > 0) & (dr.max(w) > 0)
-                children.append((si.spawn_ray(si.to_world(bs.wo)), w, keep))
+                contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth)
+            if terms.spawns_children(depth):
+                flags = bsdf.flags()
+                for flag, lobe_ctx in terms.lobes:
+                    follow = delta & mi.has_flag(flags, flag)
+                    bs, weight = bsdf.sample(lobe_ctx, si, 0.5, mi.Point2f(0.5, 0.5), follow)
+                    w = beta * weight
+                    keep = follow & (bs.pdf > 0) & (dr.max(w) > 0)
+                    children.append((si.spawn_ray(si.to_world(bs.wo)), w, keep))
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, slot)
         if not children:
             dr.eval(L)

@@ -17,12 +17,17 @@ ray casts; only the loop is ours:
   with probability R and refraction with 1 - R, so the weight stays 1 up to
   the (n1/n2)^2 radiance scale); our tracer follows every lobe instead, so
   the two agree in expectation;
-* area emitters hit by a camera or specular ray add their radiance; an
-  emitter whose Python object says ``hit_term = True`` (the classic model's
-  light spheres and backdrop, ``reference/emitters/``) only where the hit
-  would still be shaded (depth < max_depth), as the tracer counts hit terms
+* emitters met by a camera or specular ray (an area light's front side, the
+  environment where a ray misses) add their radiance; an emitter whose
+  Python object says ``hit_term = True`` (the classic model's light spheres
+  and backdrop, ``reference/emitters/``) only where the hit would still be
+  shaded (depth < max_depth), as the tracer counts hit terms
   (``tracer/emitters/base.py``);
 * ``max_depth`` counts path segments as Mitsuba's other integrators do.
+
+These terms are :mod:`reference.shading`, the same code as the deterministic
+reference's (:mod:`reference.deterministic`): the two differ only in how
+they choose lobes and light samples.
 
 With ``moments = true`` it also returns the per-sample second moment of each
 RGB channel as AOVs ``m2.R``, ``m2.G``, ``m2.B``, from which the harness gets
@@ -58,6 +63,8 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
+from reference.shading import Terms
+
 
 class WhittedIntegrator(mi.SamplingIntegrator):
     """Whitted light transport with every emitter sampled once per sample."""
@@ -87,12 +94,8 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         return mi.PCG32(width, mi.UInt64(key), mi.UInt64(_mix(key + 0x9E3779B9)))
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        ctx = mi.BSDFContext()
-        ctx_delta = mi.BSDFContext()   # the delta lobes only (see the module docstring)
-        ctx_delta.type_mask = +mi.BSDFFlags.Delta
-        emitters = scene.emitters()
-        hit_terms = [mi.EmitterPtr(e) for e in emitters if getattr(e, "hit_term", False)]
-        max_depth = self.max_depth
+        terms = Terms(mi, scene, self.max_depth)   # what a hit adds (reference/shading.py)
+        emitters = terms.emitters
         rng = self._stream(sampler, ray)
 
         area = [not mi.has_flag(e.flags(), mi.EmitterFlags.Delta) for e in emitters]
@@ -100,37 +103,21 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         def body(ray, L, beta, depth, active, valid, rng, rand):
             si = scene.ray_intersect(ray, active)
             valid |= active & si.is_valid() & (depth == 0)
-            # Emitted radiance of an area light hit on its front side; a hit term only
-            # where the hit will be shaded.
-            emitter = si.emitter(scene)
-            seen = mi.Bool(active)
-            if hit_terms:
-                term = emitter == hit_terms[0]
-                for ptr in hit_terms[1:]:
-                    term |= emitter == ptr
-                seen &= ~term | (depth + 1 < max_depth)
-            L += beta * dr.select(seen, emitter.eval(si, seen), 0)
+            L += beta * terms.emitted(si, active, depth + 1)   # depth + 1: this segment
             depth += 1
-            active &= si.is_valid() & (depth < max_depth)
+            active &= si.is_valid() & terms.shaded(depth)
 
             bsdf = si.bsdf(ray)
-            flags = bsdf.flags()
-            smooth = active & mi.has_flag(flags, mi.BSDFFlags.Smooth)
+            smooth, delta = terms.follows(bsdf.flags(), active)
             for emitter, sampled in zip(emitters, area, strict=True):
                 if sampled:
                     rand |= smooth
                 u = mi.Point2f(rng.next_float32(smooth), rng.next_float32(smooth))
-                ds, weight = emitter.sample_direction(si, u, smooth)
-                lit = smooth & (ds.pdf != 0) & (dr.max(weight) > 0)
-                shadow = si.spawn_ray_to(ds.p)
-                lit &= ~scene.ray_test(shadow, lit)
-                f = bsdf.eval(ctx, si, si.to_local(ds.d), lit)
-                L += dr.select(lit, beta * f * weight, 0)
+                L += terms.direct(si, bsdf, emitter, u, beta, smooth)
 
-            delta = active & mi.has_flag(flags, mi.BSDFFlags.Delta)
             u1 = rng.next_float32(delta)
             u2 = mi.Point2f(rng.next_float32(delta), rng.next_float32(delta))
-            bs, bsdf_weight = bsdf.sample(ctx_delta, si, u1, u2, delta)
+            bs, bsdf_weight = bsdf.sample(terms.delta, si, u1, u2, delta)
             beta = dr.select(delta, beta * bsdf_weight, beta)
             # A lobe chosen with probability below 1: the other one was possible.
             rand |= delta & (bs.pdf > 0) & (bs.pdf < 1)

@@ -7,8 +7,8 @@ infinite emitter (Mitsuba makes it the scene's environment, which rays that
 hit nothing evaluate) whose ``eval`` is the radiance and whose
 ``sample_direction`` returns weight 0 with pdf 0, so no integrator lights a
 point with it. It is a hit term (``hit_term = True``, see
-:mod:`tracer.emitters.base`): the harness's ``whitted`` integrator counts it
-only for rays that would still be shaded, as minray's trace returns its
+:mod:`tracer.emitters.base`): both of the harness's references count it
+only for rays that would still be shaded (:mod:`reference.shading`), as minray's trace returns its
 ambient colour for a ray that misses, at DEPTH calls and no deeper.
 """
 

@@ -21,12 +21,13 @@ minray light:
 * **glow** (``eval``): kl x colour where a ray hits the sphere, on either
   side, as minray's trace returns kl colour for a hit on it.
 
-Both are hit terms in the classic model (:mod:`tracer.emitters.base`): the
-harness's ``whitted`` integrator counts the glow of an emitter that has
-``hit_term = True`` only where it would still shade the hit (depth <
-max_depth), as the tracer counts the classic material's emission. Mitsuba's
-``path`` integrator does not know hit terms (it counts the glow at the last
-segment too) and also reaches the glow through diffuse bounces.
+Both are hit terms in the classic model (:mod:`tracer.emitters.base`): both
+of the harness's references count the glow of an emitter that has
+``hit_term = True`` only where they would still shade the hit (depth <
+max_depth; :mod:`reference.shading`), as the tracer counts the classic
+material's emission. Mitsuba's ``path`` integrator does not know hit terms
+(it counts the glow at the last segment too) and also reaches the glow
+through diffuse bounces.
 """
 
 from __future__ import annotations

@@ -1,0 +1,115 @@
+"""What both Mitsuba-side references do at one hit of Whitted's ray tree.
+
+The deterministic reference (:mod:`reference.deterministic`, both lobes of
+every delta BSDF, the tracer's light samples) and the one-lobe integrator
+(:mod:`reference.integrators`, one lobe and its own light samples per
+sample) differ only in how they choose; what a hit adds and where rays go
+next is this one piece of code, so that the two honour the hooks of the
+scene model alike (``docs/extending.md``). Everything is a call into
+Mitsuba 3's API, and nothing asks which plugin it holds:
+
+* **light seen** (:meth:`Terms.emitted`): ``SurfaceInteraction3f.emitter``
+  and ``Emitter.eval`` for every ray, hit or not (Mitsuba returns the
+  scene's environment emitter where a ray misses, and an area emitter
+  evaluates to zero on its back side). An emitter whose Python object says
+  ``hit_term = True`` (the classic model's light-sphere glow and its
+  backdrop, ``reference/emitters/``) is a *hit term*: counted only where the
+  hit is still shaded, i.e. for a ray of path segment k < max_depth, as the
+  tracer counts hit terms (:mod:`tracer.emitters.base`; with them
+  max_depth = DEPTH + 1 is Heckbert's DEPTH exactly);
+* **direct light** (:meth:`Terms.direct`), at a BSDF with a smooth lobe
+  (``BSDFFlags.Smooth``): one ``Emitter.sample_direction`` per emitter, a
+  shadow ray (``Scene.ray_test`` of ``spawn_ray_to``) and ``BSDF.eval``;
+  an emitter that lights nothing returns a zero weight (``whitted_background``);
+* **delta lobes**, at a BSDF with any delta lobe, smooth part or not
+  (``whitted_classic`` has a diffuse part and fixed-weight reflection and
+  transmission): ``BSDF.sample`` in a context whose type mask keeps the
+  delta lobes only (:attr:`Terms.delta`: Mitsuba then picks one of them, and
+  never the smooth lobe, which Whitted's model does not follow) or one lobe
+  alone (:attr:`Terms.lobes`: that lobe with its own weight, e.g. R or
+  (1 - R)(n1/n2)^2 from ``dielectric``, ks or kt from ``whitted_classic``);
+* **the last segment** (:attr:`Terms.last_segment_sees`): a ray of path
+  segment max_depth is never shaded, so it can add light only by meeting an
+  emitter that is not a hit term: one on a shape (an area light) or an
+  environment that is not a delta direction (Mitsuba's ``directional`` is
+  flagged ``Infinite`` too, but no ray meets it). Where there is none, such
+  rays are not traced at all, the rule the tracer follows
+  (``Integrator.last_level_sees``), so both sides trace the same rays.
+"""
+
+from __future__ import annotations
+
+import drjit as dr
+
+
+def is_hit_term(emitter) -> bool:
+    """Whether an emitter's radiance where a ray meets it is a hit term (module docstring)."""
+    return bool(getattr(emitter, "hit_term", False))
+
+
+def seen_by_rays(emitter, mi) -> bool:
+    """Whether a ray can meet the emitter: one on a shape, or at infinity but not a delta
+    direction."""
+    flags = emitter.flags()
+    return emitter.get_shape() is not None or (
+        mi.has_flag(flags, mi.EmitterFlags.Infinite) and
+        not mi.has_flag(flags, mi.EmitterFlags.DeltaDirection))
+
+
+class Terms:
+    """The terms of one Mitsuba scene at a hit, for a given ``max_depth`` (module docstring)."""
+
+    def __init__(self, mi, scene, max_depth: int):
+        self.mi = mi
+        self.scene = scene
+        self.max_depth = int(max_depth)
+        self.emitters = list(scene.emitters())
+        #: hit-term emitters, compared by pointer with the emitter a ray meets
+        self.hit_terms = [mi.EmitterPtr(e) for e in self.emitters if is_hit_term(e)]
+        self.last_segment_sees = any(seen_by_rays(e, mi) and not is_hit_term(e)
+                                     for e in self.emitters)
+        self.ctx = mi.BSDFContext()
+        #: the delta lobes only: BSDF.sample picks one of them, never a smooth lobe
+        self.delta = mi.BSDFContext()
+        self.delta.type_mask = +mi.BSDFFlags.Delta
+        #: (flag, context) for each delta lobe alone
+        self.lobes = []
+        for flag in (mi.BSDFFlags.DeltaReflection, mi.BSDFFlags.DeltaTransmission):
+            ctx = mi.BSDFContext()
+            ctx.type_mask = flag
+            self.lobes.append((flag, ctx))
+
+    def shaded(self, segment):
+        """Whether the hit of a ray of path segment ``segment`` (1 = camera ray) is shaded."""
+        return segment < self.max_depth
+
+    def emitted(self, si, active, segment):
+        """Radiance seen by rays of path segment ``segment`` (int or UInt32) at ``si``:
+        the emitter they meet, hit terms only where :meth:`shaded`."""
+        mi = self.mi
+        emitter = si.emitter(self.scene)
+        seen = mi.Bool(active)
+        if self.hit_terms:
+            term = emitter == self.hit_terms[0]
+            for ptr in self.hit_terms[1:]:
+                term |= emitter == ptr
+            seen &= ~term | mi.Bool(self.shaded(segment))
+        return dr.select(seen, emitter.eval(si, seen), 0)
+
+    def follows(self, flags, active):
+        """(smooth, delta): lanes whose BSDF gathers direct light, and those with delta lobes."""
+        mi = self.mi
+        return (active & mi.has_flag(flags, mi.BSDFFlags.Smooth),
+                active & mi.has_flag(flags, mi.BSDFFlags.Delta))
+
+    def direct(self, si, bsdf, emitter, u, beta, active):
+        """beta f cos x (the emitter's weight) for one light sample ``u``, where not shadowed."""
+        ds, weight = emitter.sample_direction(si, u, active)
+        lit = active & (ds.pdf != 0) & (dr.max(weight) > 0)
+        lit &= ~self.scene.ray_test(si.spawn_ray_to(ds.p), lit)
+        f = bsdf.eval(self.ctx, si, si.to_local(ds.d), lit)
+        return dr.select(lit, beta * f * weight, 0)
+
+    def spawns_children(self, segment: int) -> bool:
+        """Whether rays of the next segment are worth tracing after segment ``segment``."""
+        return segment + 1 < self.max_depth or self.last_segment_sees
