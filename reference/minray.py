@@ -291,10 +291,11 @@ def agreement(ours: np.ndarray, theirs: np.ndarray) -> Agreement:
 
 # --------------------------------------------------------------------------- explanation
 
-#: Scales of the tracer's ray-origin offset tried to explain a value (see :func:`explain`):
-#: 1/64 and 1/512 of its default 1024 float32 ulps of the position. 1/1024 (one ulp)
-#: lets float32 rays hit their own sphere again.
-TIGHT_OFFSETS = (1 / 64, 1 / 512)
+#: Ray-origin offsets tried to explain a value (see :func:`explain`), in float32 ulps of
+#: 1 + max |p_i| as the tracer's own (tracer.geometry.RAY_EPSILON_ULPS, Mitsuba's 1500):
+#: 16 and 2. At one ulp float32 rays begin to hit their own sphere again (5 or 6 values
+#: at 256 x 256 DEPTH 2-20), at half an ulp a third of the image.
+TIGHT_OFFSET_ULPS = (16, 2)
 
 KINDS = {"outline": "silhouette", "shadow": "shadow edge", "tir": "critical angle"}
 
@@ -328,23 +329,31 @@ def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = Non
             ) -> list[Difference]:
     """Every value of ours more than one step from minray's ``theirs``, with its cause.
 
-    The tracer starts every reflected, refracted and shadow ray 2^-14 (1 +
-    max |p_i|) off the surface (:func:`tracer.geometry.spawn_offset`, 1024
-    float32 ulps of the position: about 5e-4 around this scene's spheres),
-    its guard against a float32 ray hitting its own surface again; minray
-    starts on the surface and ignores hits nearer than 1e-7, in double
-    precision. Where minray's ray tree passes that close to a discontinuity,
-    the two trees part. A value is explained as "ray offset" when the
-    tracer, rendering with that offset made 64 or 512 times smaller
-    (``Integrator(offset_scale=...)``), prints minray's number within one
-    step; ``kind`` names the discontinuity minray's tree passes nearest
-    (:func:`decision_margins`): a ray passing a sphere's outline
-    (silhouette), a shadow ray passing one (shadow edge), or a refraction at
-    the critical angle. A value that even the smaller offsets do not bring to
-    minray's is explained as "float precision" when that discontinuity lies
-    within :func:`float_margin` (16 float32 ulps of the scene's extent; for a
-    critical angle 16 ulps of 1): float32 cannot tell on which side it lies.
+    The tracer starts every reflected, refracted and shadow ray 1500 float32
+    ulps of 1 + max |p_i| off the surface (:func:`tracer.geometry.spawn_offset`,
+    Mitsuba's own ``RayEpsilon``, so that the deterministic Mitsuba reference
+    traces the same ray tree: about 8e-4 around this scene's spheres), where
+    minray starts on the surface and ignores hits nearer than 1e-7, in double
+    precision. The offset moves the next hit by about its own size, and
+    reflections off curved surfaces and refractions magnify the shift at every
+    bounce; where minray's ray tree passes a silhouette, a shadow edge or a
+    critical angle within that reach, the two trees part. (At 32 x 32, DEPTH
+    10 and 20, pixel (8, 3) prints 25 40 43 where minray prints 33 43 45:
+    after six bounces, two passes through the glass among them, the hit on
+    the orange sphere has moved far enough that its shadow ray towards a
+    light meets the glass's rim; with 1024, 16 or 2 ulps the tracer prints 33
+    43 45.) A value is explained as "ray offset" when the tracer, rendering
+    with the offset made :data:`TIGHT_OFFSET_ULPS` (16 or 2) ulps
+    (``Integrator(offset_scale=...)``), prints minray's number within one step;
+    ``kind`` names the discontinuity minray's tree passes nearest
+    (:func:`decision_margins`): a ray passing a sphere's outline (silhouette),
+    a shadow ray passing one (shadow edge), or a refraction at the critical
+    angle. A value that even the smaller offsets do not bring to minray's is
+    explained as "float precision" when that discontinuity lies within
+    :func:`float_margin` (16 float32 ulps of the scene's extent; for a critical
+    angle 16 ulps of 1): float32 cannot tell on which side it lies.
     """
+    from tracer.geometry import RAY_EPSILON_ULPS
     from tracer.imageio import ppm_values
     from tracer.integrator import Integrator
 
@@ -353,7 +362,8 @@ def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = Non
     beyond = np.argwhere(np.abs(ours.astype(np.int64) - theirs) > 1)
     if len(beyond) == 0:
         return []
-    tight = [ppm_values(Integrator(scene, offset_scale=s).render().image) for s in TIGHT_OFFSETS]
+    tight = [ppm_values(Integrator(scene, offset_scale=ulps / RAY_EPSILON_ULPS).render().image)
+             for ulps in TIGHT_OFFSET_ULPS]
     m = decision_margins(scene, depth)
     limits = {"outline": float_margin(scene), "shadow": float_margin(scene),
               "tir": FLOAT_ULPS * 2.0 ** -24}

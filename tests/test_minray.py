@@ -6,14 +6,14 @@ print the same numbers: at least 99.5 % of the values equal or one step of
 255 apart (float32 against minray's double precision rounds a value near
 k + 1/2 either way), and every value further apart explained
 (:func:`reference.minray.explain`): it must come out as minray's number
-when the tracer's ray offset (rays leave surfaces 2^-14 (1 + |p|) off, about
-5e-4 here, where minray starts on the surface in double precision) is made
-64 or 512 times smaller, i.e. where that offset moved a ray across a
-silhouette or a shadow edge of minray's ray tree, or lie where minray's tree
-passes such an edge closer than float32 resolves (16 ulps of the scene's
-extent; none at the stored sizes, 3 values at 512 x 512 DEPTH 3). The
-default run checks every depth at 32 x 32 and DEPTH 3 at 256 x 256; the
-other 256 x 256 depths are marked slow.
+when the tracer's ray offset (rays leave surfaces 1500 float32 ulps of
+1 + max |p| off, Mitsuba's RayEpsilon, about 8e-4 here, where minray starts
+on the surface in double precision) is made 16 or 2 ulps, i.e. where that
+offset moved a ray across a silhouette or a shadow edge of minray's ray
+tree, or lie where minray's tree passes such an edge closer than float32
+resolves (16 ulps of the scene's extent; none at the stored sizes, 3 values
+at 512 x 512 DEPTH 3). The default run checks every depth at 32 x 32 and
+DEPTH 3 at 256 x 256; the other 256 x 256 depths are marked slow.
 """
 
 import gzip
@@ -62,8 +62,13 @@ def check_reproduced(size: int, depth: int):
 
 @pytest.mark.parametrize("depth", DEPTHS)
 def test_minrays_32_pixel_images_are_reproduced(depth):
-    a = check_reproduced(32, depth)
-    assert a.within_one == 1.0 and a.equal > 0.995, a.line()
+    # The same law as at 256 x 256, not "no value beyond one step": values beyond one
+    # step come from minray's trees passing a discontinuity within the offset's reach,
+    # which at 256 x 256 happens to 0.007 % (DEPTH 1) to 0.11 % (DEPTH 20) of the values,
+    # 0.2 to 3.4 of the 3072 values at 32 x 32 on average. At DEPTH 10 and 20 one pixel
+    # (3 values) is such a case; with 1024 ulps instead of Mitsuba's 1500 none was, as a
+    # count of mean 2.3 is 0 one time in ten.
+    check_reproduced(32, depth)
 
 
 @pytest.mark.parametrize("depth", [pytest.param(d, marks=() if d == 3 else pytest.mark.slow)
