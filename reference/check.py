@@ -427,6 +427,7 @@ def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
         noise = np.maximum(est - q2, 0)      # the estimate holds the dithered rounding too
         sum_var = local_variance(diff.sum(-1), valid)
         spread = np.zeros_like(u) if ref.spread is None else ref.spread
+        spread = np.where(spread > floor, spread, 0.0)   # below float precision: no edge
         a = footprint_factor(diff, noise + q2 + floor, spread, valid[..., None] & ~(
             user.saturated if user.saturated is not None else np.zeros_like(u, dtype=bool)))
         if a > 0:
@@ -708,7 +709,7 @@ def write_outputs(run: CheckRun, outdir, title: str) -> dict:
     a = run.result.arrays
     rel = pixel_relative_difference(a["image"], a["reference"])
     heat_map(rel, out / "diff.png", f"{run.scene}: {Path(run.image_path).name} against the "
-                                    "reference")
+                                    "reference", label="|image - reference| / reference")
     side_by_side(a["image"], a["reference"], a["failing"], out / "side_by_side.png")
     write_exr(out / "reference.exr", a["reference"])
     run.files = {k: str(out / k) for k in ("diff.png", "side_by_side.png", "reference.exr",

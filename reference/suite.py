@@ -246,7 +246,8 @@ def manifest_markdown(manifest: dict) -> str:
              "(LDE), and both seen in mirrors and through glass (LS+E, LDS+E); no indirect "
              "diffuse light. PNG and PPM images are read as sRGB unless you say "
              "`--encoding linear` or `minray`.", "",
-             "| scene | size | spp | max_depth | what it tests | formulas |", "|---|---|---|---|---|---|"]
+             "| scene | size | spp | max_depth | what it tests | formulas |",
+             "|---|---|---|---|---|---|"]
     for s in manifest["scenes"]:
         t = s["tests"]
         what = "; ".join(f"{k}: {', '.join(v)}" for k, v in t.items() if v)
