@@ -9,21 +9,22 @@ difference is:
   four paths of a Whitted tracer, LE, LDE, LS+E and LDS+E (lecture 1, "Light
   path notation"; Heckbert, "Adaptive radiosity textures for bidirectional ray
   tracing", SIGGRAPH 1990), whose images the tracer renders with ``--lpe`` and
-  which sum to the reference. D ~ sum_p a_p R_p: a_p is the relative error of
-  the light on path p ("the light seen through glass, LDS+E, is 4.8 % too
-  bright") and each path's share is how much of D it explains alone;
+  which sum to the reference. Each pixel's difference beyond its noise is
+  shared among the paths by their light there ("the error sits in light seen
+  through glass"), and D ~ sum_p a_p R_p gives each path's relative error
+  ("that light is 4.8 % too bright");
 * by material (:func:`material_split`): the signed sum of D over the pixels
   whose camera ray first hits each material (:func:`tracer.integrator.material_ids`),
-  the background and the emitters, with its share of sum |D| and its relative
-  bias;
+  the background and the emitters, with its share of the difference beyond
+  the noise and its relative bias;
 * by suspect (:func:`rank_suspects`): candidates, each a formula bug with a
   function rendering the reference with that bug; D ~ k (M_c - R) for each
   candidate's image M_c, ranked by the share of D it explains. A render made
   with one of the bugs is explained by that bug with k near 1.
 
-The share of a fit is its explained sum of squares over the part of
-sum w D^2 that noise does not account for (sum w D^2 minus the number of
-values, its expectation under noise alone): "explains 95 % of the
+The share a suspect explains is its fit's explained sum of squares over
+the part of sum w D^2 that noise does not account for (sum w D^2 minus the
+number of values, its expectation under noise alone): "explains 95 % of the
 difference beyond the noise", at most 100 %.
 """
 
@@ -79,8 +80,8 @@ class PathFit:
     #: relative error of that light, from the joint fit, and its standard error
     relative_error: float
     standard_error: float
-    #: share of the difference (beyond noise) this path explains alone
-    explains: float
+    #: share of the difference beyond the noise that falls on this path's light
+    share: float
 
 
 def light_path_images(scene, seed: int = 0) -> dict[str, np.ndarray]:
@@ -95,9 +96,23 @@ def light_path_images(scene, seed: int = 0) -> dict[str, np.ndarray]:
     return out
 
 
+def beyond_noise(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None = None) -> np.ndarray:
+    """H x W: each pixel's difference beyond one standard deviation of its noise, summed."""
+    e = np.maximum(np.abs(diff) - np.sqrt(np.maximum(var, 0)), 0).sum(-1)
+    return e if use is None else np.where(use, e, 0.0)
+
+
 def light_path_fit(diff: np.ndarray, var: np.ndarray, parts: dict[str, np.ndarray],
                    use: np.ndarray | None = None) -> list[PathFit]:
-    """D ~ sum_p a_p R_p by weighted least squares; the paths by how much they explain."""
+    """The difference by light path, largest share first.
+
+    ``share``: each pixel's difference beyond its noise is shared among the
+    paths in proportion to their light in that pixel (a Fresnel error, which
+    moves light between reflection and refraction by amounts that change with
+    the angle, lands on the paths through glass). ``relative_error``: the joint
+    weighted least-squares fit D ~ sum_p a_p R_p (a light that is a few per cent
+    too bright everywhere comes out as that a_p).
+    """
     w = _weights(var, use)
     d = np.where(w > 0, diff, 0.0)
     names = list(parts)
@@ -107,19 +122,20 @@ def light_path_fit(diff: np.ndarray, var: np.ndarray, parts: dict[str, np.ndarra
     a = np.array([[float((w * xi * xj).sum()) for xj in xs] for xi in xs])
     b = np.array([float((w * xi * d).sum()) for xi in xs])
     coef = np.linalg.lstsq(a, b, rcond=None)[0]
-    try:
-        cov = np.linalg.pinv(a)
-    except np.linalg.LinAlgError:
-        cov = np.full_like(a, np.inf)
-    total = sum(float(np.abs(parts[p]).sum()) for p in names) or 1.0
-    excess = _excess(d, w)
+    cov = np.linalg.pinv(a)
+    light = {p: np.abs(parts[p]).sum(-1) for p in names}
+    per_pixel = sum(light.values())
+    e = beyond_noise(diff, var, use)
+    total_e = float(e.sum()) or 1.0
+    total = sum(float(v.sum()) for v in light.values()) or 1.0
     fits = []
     for i, p in enumerate(names):
-        _, _, ss = single_fit(d, xs[i], w)
-        fits.append(PathFit(p, PATH_WORDS.get(p, p), float(np.abs(parts[p]).sum()) / total,
+        frac = np.divide(light[p], per_pixel, out=np.zeros_like(per_pixel),
+                         where=per_pixel > 0)
+        fits.append(PathFit(p, PATH_WORDS.get(p, p), float(light[p].sum()) / total,
                             float(coef[i]), float(math.sqrt(max(cov[i, i], 0))),
-                            _share(ss, excess)))
-    return sorted(fits, key=lambda f: -f.explains)
+                            float((e * frac).sum()) / total_e))
+    return sorted(fits, key=lambda f: -f.share)
 
 
 @dataclass
@@ -132,22 +148,24 @@ class MaterialPart:
     bias: float | None
 
 
-def material_split(diff: np.ndarray, reference: np.ndarray, material_ids: np.ndarray,
-                   material_names: list[str], use: np.ndarray | None = None) -> list[MaterialPart]:
-    """The difference summed over each first-hit material, the background and the emitters."""
+def material_split(diff: np.ndarray, var: np.ndarray, reference: np.ndarray,
+                   material_ids: np.ndarray, material_names: list[str],
+                   use: np.ndarray | None = None) -> list[MaterialPart]:
+    """The difference beyond noise over each first-hit material, the background, the emitters."""
     from reference.compare import regions_of
 
     d = np.asarray(diff, dtype=np.float64).sum(-1)
     r = np.abs(np.asarray(reference, dtype=np.float64)).sum(-1)
     ok = np.ones(d.shape, dtype=bool) if use is None else use
-    total = float(np.abs(d[ok]).sum()) or 1.0
+    e = beyond_noise(diff, var, ok)
+    total = float(e.sum()) or 1.0
     out = []
     for name, mask in regions_of(material_ids, material_names, tiles=0).items():
         if name == "image":
             continue
         m = mask & ok
         level = float(r[m].sum())
-        out.append(MaterialPart(name, int(m.sum()), float(np.abs(d[m]).sum()) / total,
+        out.append(MaterialPart(name, int(m.sum()), float(e[m].sum()) / total,
                                 float(d[m].sum()) / level if level > 0 else None))
     return sorted(out, key=lambda p: -p.share)
 
@@ -156,8 +174,8 @@ def format_decomposition(paths: list[PathFit], materials: list[MaterialPart]) ->
     lines = ["where the difference sits:"]
     for f in paths:
         lines.append(f"  light path {f.path:<6} ({f.words}; {100 * f.light_share:.0f} % of the "
-                     f"light): {100 * f.relative_error:+.2f} % +- {100 * f.standard_error:.2f} %, "
-                     f"alone explains {100 * f.explains:.0f} % of the difference")
+                     f"light): {100 * f.share:.0f} % of the difference; fitted as "
+                     f"{100 * f.relative_error:+.2f} % +- {100 * f.standard_error:.2f} % of it")
     for m in materials[:4]:
         bias = "" if m.bias is None else f", bias {100 * m.bias:+.2f} % of its light"
         lines.append(f"  {m.name} ({m.pixels:,} pixels): {100 * m.share:.0f} % of the "

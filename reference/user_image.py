@@ -125,9 +125,15 @@ def decode(codes: np.ndarray, maxval: int, encoding: str) -> np.ndarray:
 
 
 def code_steps(codes: np.ndarray, maxval: int, encoding: str) -> np.ndarray:
-    """The linear width of each code's cell: decode(c + 1/2) - decode(max(c - 1/2, 0))."""
+    """The linear width of each code's cell: decode(c + 1/2) - decode(c - 1/2).
+
+    At code 0 the cell's lower half holds no light (a renderer writes no
+    negative values), but the code still stands for anything up to half a step:
+    the full width keeps |value - decode(c)| <= step / 2 (the curves extend
+    linearly below 0).
+    """
     c = np.asarray(codes, dtype=np.float64)
-    return decode(c + 0.5, maxval, encoding) - decode(np.maximum(c - 0.5, 0), maxval, encoding)
+    return decode(c + 0.5, maxval, encoding) - decode(c - 0.5, maxval, encoding)
 
 
 def half_steps(values: np.ndarray) -> np.ndarray:
