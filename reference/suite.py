@@ -10,11 +10,13 @@ the scene itself: its material, light and shape kinds, the features in use
 Heckbert's paths, and the formulas those stand for (:data:`FORMULAS`, one
 entry per registered kind, each with the lecture topic it is taught under).
 
-The reference EXR holds three layers: R, G, B (the tracer's image at the
+The reference EXR holds four layers: R, G, B (the tracer's image at the
 scene's strata, or the mean of :data:`reference.compare.TRACER_SEEDS` seeds
 where it samples area lights), ``variance`` (of that mean; zero where it is
-deterministic) and ``spread`` (the variance of one sample within each
-pixel, which :func:`reference.check.footprint_factor` scales).
+deterministic), ``spread`` (the variance of one sample within each pixel,
+which :func:`reference.check.footprint_factor` scales) and ``quadrature``
+(:func:`reference.check.quadrature_error`). ``--update`` replaces R, G, B and
+``variance`` by the golden image's and keeps the other two.
 
 ``check`` grades a folder of images named after the scenes
 (``glass_sphere.png``, ``three_lights.exr``, ...) with
@@ -151,12 +153,12 @@ def _copy_meshes(scene, scene_path: Path, dest: Path) -> list[Path]:
 
 
 def write_reference(path: Path, image: np.ndarray, variance: np.ndarray | None,
-                    spread: np.ndarray | None) -> None:
-    """A reference EXR: RGB, and the ``variance`` and ``spread`` layers where given."""
+                    spread: np.ndarray | None, quadrature: np.ndarray | None = None) -> None:
+    """A reference EXR: RGB, and the ``variance``, ``spread`` and ``quadrature`` layers."""
     from tracer.imageio import write_exr
 
     layers = {}
-    for name, a in (("variance", variance), ("spread", spread)):
+    for name, a in (("variance", variance), ("spread", spread), ("quadrature", quadrature)):
         if a is not None:
             layers.update({f"{name}.{c}": np.asarray(a[..., i], dtype=np.float32)
                            for i, c in enumerate("RGB")})
@@ -184,7 +186,7 @@ def read_reference(path: Path, name: str):
     var = layer("variance.")
     if var is not None and not var.any():
         var = None
-    return Reference(image, var, name, 1, layer("spread."))
+    return Reference(image, var, name, 1, layer("spread."), layer("quadrature."))
 
 
 def export(outdir: Path, scene_paths: list[Path], log=print) -> dict:
@@ -207,7 +209,7 @@ def export(outdir: Path, scene_paths: list[Path], log=print) -> dict:
         xml = write_xml(scene, outdir / "mitsuba" / f"{name}.xml", "path", jitter=True)
         ref = tracer_reference(scene)
         write_reference(outdir / "references" / f"{name}.exr", ref.image, ref.variance,
-                        ref.spread)
+                        ref.spread, ref.quadrature)
         write_png(outdir / "references" / f"{name}.png", ref.image)
         parts = light_path_images(scene)
         total = float(np.abs(ref.image).sum()) or 1.0
@@ -386,7 +388,7 @@ def update_references(result: SuiteResult, suite_dir: Path) -> list[Path]:
         exr = suite_dir / e["files"]["reference_exr"]
         if g.user is None:
             raise UserError(f"{g.name}: no image to store")
-        write_reference(exr, g.user.image, g.user.variance, old.spread)
+        write_reference(exr, g.user.image, g.user.variance, old.spread, old.quadrature)
         write_png(suite_dir / e["files"]["reference_png"], g.user.image)
         e["reference"] = {"source": f"golden image {g.image}", "updated": _now(),
                           "storage": g.user.storage}
