@@ -7,10 +7,11 @@ the laws on a few seeds, small images and short renders.
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import SCENES, run_cli, write_scene
+from conftest import SCENES, run_cli
 
 from reference.check import (
     Thresholds,
@@ -21,46 +22,9 @@ from reference.check import (
 )
 from reference.user_image import UserImage, code_steps, decode, read_user_image
 
-# A glass and a mirror sphere before emitting panels, nothing diffuse: every path is
-# L S* E, so Mitsuba's path tracer converges to exactly Whitted's image (no indirect
-# diffuse light, no caustic a Whitted tracer would miss), with the noise of choosing one
-# lobe per sample at the glass.
-GLASS_LIGHT = """
-description = "glass and mirror before emitting panels"
-[film]
-width = 64
-height = 48
-spp = 64
-max_depth = 6
-[camera]
-origin = [0, 0, 5]
-target = [0, 0, 0]
-fov = 40
-[materials.glass]
-type = "dielectric"
-ior = 1.5
-[materials.mirror]
-type = "mirror"
-reflectance = 0.8
-[[shapes]]
-type = "sphere"
-center = [-0.6, 0, 0]
-radius = 0.8
-material = "glass"
-[[shapes]]
-type = "sphere"
-center = [0.9, 0.3, -0.5]
-radius = 0.5
-material = "mirror"
-[[shapes]]
-type = "rectangle"
-to_world = [ { scale = [1.5, 3, 1] }, { translate = [-1.5, 0, -3] } ]
-emitter = { radiance = [0.9, 0.4, 0.2] }
-[[shapes]]
-type = "rectangle"
-to_world = [ { scale = [1.5, 3, 1] }, { translate = [1.5, 0, -3] } ]
-emitter = { radiance = [0.2, 0.4, 0.9] }
-"""
+#: Glass and a mirror before emitting panels: Mitsuba's path tracer converges to Whitted's
+#: image there.
+GLASS_LIGHTS = Path(__file__).parent / "data" / "glass_before_lights.toml"
 
 
 def _user(image, **kw) -> UserImage:
@@ -303,7 +267,7 @@ def test_mitsubas_own_path_tracer_passes_on_direct_light(name):
 def test_mitsubas_own_path_tracer_passes_through_glass(tmp_path):
     from tracer import load_scene
 
-    scene = load_scene(write_scene(tmp_path, GLASS_LIGHT, "glass_light.toml"))
+    scene = load_scene(GLASS_LIGHTS)
     ref = tracer_reference(scene)
     for seed in range(3):
         r = _judge(scene, _mitsuba_path(scene, seed), ref)

@@ -42,7 +42,8 @@ def test_the_manifest_is_derived_from_the_scene():
 @pytest.fixture(scope="module")
 def suite_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("suite") / "suite"
-    r = run_cli("suite", "export", out, "--scenes", "[gs][lp]*_[sp]*")   # glass_sphere, sphere_point
+    # glass_sphere and sphere_point
+    r = run_cli("suite", "export", out, "--scenes", "[gs][lp]*_[sp]*")
     assert r.returncode == 0, r.stdout + r.stderr
     return out
 
