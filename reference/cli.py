@@ -561,6 +561,13 @@ def cmd_check(args) -> int:
     check_render(scene, moments=True)
     if args.mitsuba or args.spp is not None:
         check_render(scene, mitsuba=True)
+    if args.mitsuba:
+        from reference.deterministic import shares_light_samples
+
+        if not shares_light_samples(scene):
+            raise UserError(f"--mitsuba: an emitter of {scene.name} has no shared light "
+                            "samples (reference.deterministic.SAMPLE_MAPS), so Mitsuba's "
+                            "deterministic reference cannot render it")
     outdir = output_folder(args.output or Path("out") / "check" /
                            f"{scene.name}-{Path(args.image).stem}")
     _backend(args)
