@@ -522,6 +522,127 @@ def cmd_scenes(args) -> int:
     return EXIT_OK
 
 
+def _thresholds(args):
+    """OpenImageIO idiff's thresholds from the options (None where not given), checked."""
+    from reference.check import Thresholds
+    from tracer.errors import UserError
+
+    th = Thresholds(**{k: getattr(args, k, None) for k in
+                       ("fail", "fail_percent", "hard_fail", "warn", "warn_percent", "hard_warn")})
+    for k, v in vars(th).items():
+        if v is None:
+            continue
+        opt = "--" + k.replace("_", "-")
+        if not v >= 0:
+            raise UserError(f"{opt}: expected a number >= 0, got {v}")
+        if k.endswith("percent") and v > 100:
+            raise UserError(f"{opt}: expected a percentage from 0 to 100, got {v}")
+    return th
+
+
+def cmd_check(args) -> int:
+    from reference.check import check_image, format_run, write_outputs
+    from reference.user_image import read_user_image
+    from tracer.errors import UserError
+    from tracer.limits import check_render
+
+    th = _thresholds(args)
+    user = read_user_image(args.image, args.encoding)   # bad input before any rendering
+    from tracer import load_scene
+
+    # --spp is the image's samples, not the reference's: the film keeps the scene's strata.
+    scene = load_scene(resolve_scene(args.scene)).with_overrides(
+        max_depth=_max_depth(args), size=args.size)
+    w, h = scene.film.width, scene.film.height
+    if user.size != (w, h):
+        raise UserError(f"{shown(args.image)} is {user.size[0]}x{user.size[1]} pixels, the "
+                        f"film of {scene.name} is {w}x{h} (render at {w}x{h}, or give --size "
+                        f"{user.size[0]}x{user.size[1]} if you rendered the scene at that size)")
+    check_render(scene, moments=True)
+    if args.mitsuba or args.spp is not None:
+        check_render(scene, mitsuba=True)
+    if args.mitsuba:
+        from reference.deterministic import shares_light_samples
+
+        if not shares_light_samples(scene):
+            raise UserError(f"--mitsuba: an emitter of {scene.name} has no shared light "
+                            "samples (reference.deterministic.SAMPLE_MAPS), so Mitsuba's "
+                            "deterministic reference cannot render it")
+    outdir = output_folder(args.output or Path("out") / "check" /
+                           f"{scene.name}-{Path(args.image).stem}")
+    _backend(args)
+    run = check_image(user, scene, args.spp, th, mitsuba=args.mitsuba, seed=args.seed,
+                      log=lambda m: print(m + " ...", flush=True))
+    title = (f"{shown(args.image)} against {scene.name} ({_describe(scene)}), read as "
+             f"{user.storage}")
+    write_outputs(run, outdir, title)
+    print(format_run(run, title))
+    print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in run.files.values()))
+    return EXIT_OK if run.passed else EXIT_FAIL
+
+
+def cmd_suite(args) -> int:
+    from reference import suite
+    from tracer.errors import UserError
+
+    given = {"--suite": args.suite, "--update": args.update or None,
+             "--encoding": args.encoding, "--spp": args.spp}
+    if args.action == "export":
+        wrong = [k for k, v in given.items() if v is not None]
+        if wrong:
+            raise UserError(f"{', '.join(wrong)}: options of `whitted suite check`, not export")
+        paths = suite.select(builtin_scenes(), args.scenes)
+        if not paths:
+            raise UserError(f"no built-in scene matches {args.scenes!r}")
+        from tracer import load_scene
+        from tracer.imageio import StagedFolder
+        from tracer.limits import check_render
+
+        for p in paths:   # refuse a bad scene before any rendering
+            check_render(load_scene(p), moments=True)
+        with StagedFolder(args.dir) as staged:
+            _backend(args)
+            print(f"whitted suite export: {len(paths)} scene(s) -> {shown(staged.target)}/",
+                  flush=True)
+            suite.export(staged.path, paths, log=lambda m: print(m, flush=True))
+            staged.commit()
+        print(f"wrote {shown(staged.target)}/manifest.json, README.md, scenes/, mitsuba/, "
+              "references/")
+        return EXIT_OK
+    th = _thresholds(args)
+    images = Path(args.dir)
+    if not images.is_dir():
+        raise UserError(f"{shown(images)}: no such folder of images")
+    suite_dir = Path(args.suite) if args.suite else None
+    if args.update and suite_dir is None:
+        raise UserError("--update rewrites a suite's stored references: give --suite DIR")
+    if suite_dir is not None and not suite_dir.is_dir():
+        raise UserError(f"{shown(suite_dir)}: no such suite folder")
+    if args.encoding is not None:
+        from reference.user_image import ENCODINGS
+
+        if args.encoding not in ENCODINGS:
+            raise UserError(f"--encoding: expected one of {', '.join(ENCODINGS)}")
+    out = output_folder(args.output or images / "whitted-check")
+    _backend(args)
+    result = suite.grade(images, suite_dir, args.scenes, args.encoding, args.spp, th,
+                         log=lambda m: print(m, flush=True))
+    out.mkdir(parents=True, exist_ok=True)
+    from reference.compare import write_json
+
+    write_json(out / "suite.json", result.to_json())
+    (out / "index.html").write_text(suite.suite_page(result))
+    print(suite.format_suite(result))
+    print(f"wrote {shown(out)}/index.html, suite.json")
+    if args.update:
+        if not result.passed:
+            print("references not updated: the run fails (fix the failing scenes first)")
+            return EXIT_FAIL
+        files = suite.update_references(result, suite_dir)
+        print(f"updated {len(files)} reference(s) in {shown(suite_dir)}/references/")
+    return EXIT_OK if result.passed else EXIT_FAIL
+
+
 # ---------------------------------------------------------------- parser
 
 
@@ -718,6 +839,105 @@ def build_parser() -> argparse.ArgumentParser:
     a.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                    help="Dr.Jit backend")
     a.set_defaults(func=cmd_assignment)
+
+    def threshold_opts(sp):
+        g = sp.add_argument_group(
+            "thresholds (OpenImageIO idiff's meanings)",
+            "A pixel fails when the difference of any channel exceeds the fail threshold; the "
+            "image fails when more than --fail-percent of its pixels fail, or when any pixel's "
+            "difference exceeds --hard-fail. By default the threshold is statistical (the "
+            "Sidak level, about 5 sigma of each pixel's noise) and 0.25 %% of the pixels may "
+            "exceed it; --fail replaces it by an absolute difference. Either way the image "
+            "must also pass the region sums, which see a small bias over many pixels and "
+            "which these options leave as they are. --warn, --warn-percent and --hard-warn "
+            "do the same for a warning (exit status 0).")
+        for name, what in (("fail", "absolute difference beyond which a pixel fails "
+                                    "(default: the statistical threshold)"),
+                           ("fail-percent", "percentage of pixels allowed to fail (default "
+                                            "0.25)"),
+                           ("hard-fail", "fail if any pixel's difference exceeds this "
+                                         "(default: none)"),
+                           ("warn", "absolute difference beyond which a pixel warns (default: "
+                                    "the statistical threshold)"),
+                           ("warn-percent", "percentage of pixels allowed to warn (default 0 "
+                                            "once a --warn option is given)"),
+                           ("hard-warn", "warn if any pixel's difference exceeds this")):
+            g.add_argument(f"--{name}", type=float, default=None, metavar="X", help=what)
+
+    encodings = ("srgb", "linear", "minray")
+    ck = sub.add_parser(
+        "check", help="judge another renderer's image against the reference",
+        description="Judge IMAGE (OpenEXR, PFM, Radiance HDR, PNG or PPM P3/P6), made by any "
+                    "renderer from SCENE, against whitted's reference for the scene: its "
+                    "tracer's image (deterministic at the scene's strata; with --mitsuba also "
+                    "Mitsuba's deterministic reference). Your image's noise comes from its "
+                    "EXR variance layer, or from --spp N (the noise of N samples of Mitsuba's "
+                    "path tracer), or is estimated from neighbouring pixels. Writes diff.png "
+                    "(heat map), side_by_side.png, reference.exr, check.json and check.html "
+                    "(a viewer: hover, flip, zoom). Exit 0 when the image agrees, 1 when it "
+                    "does not, 2 for bad input (an unreadable file, a size other than the "
+                    "film's).")
+    ck.add_argument("image", metavar="IMAGE", help="your renderer's image")
+    ck.add_argument("--scene", required=True, help="the scene it shows (.toml or built-in name)")
+    ck.add_argument("-o", "--output", default=None,
+                    help="output folder (default: out/check/SCENE-IMAGE)")
+    ck.add_argument("--encoding", choices=encodings, default=None,
+                    help="how an 8-bit PNG or PPM encodes light: srgb (default), linear "
+                         "(value / maxval, clipped at 1) or minray (255 x linear, no gamma, no "
+                         "clamp: values above 255 allowed)")
+    ck.add_argument("--spp", type=_positive, default=None,
+                    help="your samples per pixel: judge your noise as that of N samples of "
+                         "Mitsuba's path tracer (without it, and without a variance layer, "
+                         "the noise is estimated from neighbouring pixels)")
+    ck.add_argument("--size", type=_size, metavar="WxH",
+                    help="the film size you rendered the scene at, e.g. 320x240")
+    ck.add_argument("--max-depth", type=_positive, dest="max_depth",
+                    help="the max_depth you rendered with (path segments)")
+    ck.add_argument("--depth", type=_positive, dest="depth",
+                    help="Heckbert's DEPTH you rendered with (= --max-depth DEPTH+1)")
+    ck.add_argument("--mitsuba", action="store_true",
+                    help="also judge the image against Mitsuba's deterministic reference, and "
+                         "check the tracer's reference against it")
+    ck.add_argument("--seed", type=int, default=0,
+                    help="seed of the reference's light samples (scenes with area lights)")
+    ck.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                    help="Dr.Jit backend")
+    threshold_opts(ck)
+    ck.set_defaults(func=cmd_check)
+
+    su = sub.add_parser(
+        "suite", help="hand out every built-in scene, or grade a folder of images",
+        description="export DIR: write every built-in scene (or those matching --scenes) into "
+                    "DIR as TOML and Mitsuba 3 XML, with its reference (EXR with variance "
+                    "layers, and PNG) and a manifest (manifest.json, README.md: size, what "
+                    "each scene tests, which formulas). check DIR: grade a folder of images "
+                    "named after the scenes (NAME.exr, .pfm, .hdr, .png or .ppm) against the "
+                    "references of --suite SUITE (or references rendered now), as `whitted "
+                    "check` does; write index.html and suite.json; exit 1 if any scene fails "
+                    "or has no image. --update then stores the images as the suite's "
+                    "references, unless the run fails.")
+    su.add_argument("action", choices=("export", "check"), metavar="export|check",
+                    help="export a suite, or check a folder of images")
+    su.add_argument("dir", metavar="DIR",
+                    help="export: the folder to write; check: the folder of images")
+    su.add_argument("--scenes", metavar="GLOB", default=None,
+                    help="only scenes whose name matches GLOB, e.g. 'glass*'")
+    su.add_argument("--suite", metavar="SUITE", default=None,
+                    help="check: an exported suite folder whose stored references to use")
+    su.add_argument("-o", "--output", default=None,
+                    help="check: folder for index.html and suite.json (default: "
+                         "DIR/whitted-check)")
+    su.add_argument("--encoding", choices=encodings, default=None,
+                    help="check: how 8-bit images encode light (as in `whitted check`)")
+    su.add_argument("--spp", type=_positive, default=None,
+                    help="check: your samples per pixel (as in `whitted check`)")
+    su.add_argument("--update", action="store_true",
+                    help="check: store the images as the suite's references (your golden "
+                         "images), refused when the run fails")
+    su.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                    help="Dr.Jit backend")
+    threshold_opts(su)
+    su.set_defaults(func=cmd_suite)
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)

@@ -523,7 +523,7 @@ def judge(test_name: str, metrics: Metrics, tracer_img, ref_img,
 
 
 def heat_map(rel: np.ndarray, path: str | Path, title: str = "", lo: float = 1e-8,
-             hi: float = 1.0) -> None:
+             hi: float = 1.0, label: str = "|tracer - Mitsuba| / Mitsuba") -> None:
     """False-colour map of per-pixel relative difference on a log scale, with a scale bar."""
     import matplotlib
 
@@ -541,7 +541,7 @@ def heat_map(rel: np.ndarray, path: str | Path, title: str = "", lo: float = 1e-
     if title:
         ax.set_title(title, fontsize=8)
     cb = fig.colorbar(im, ax=ax, fraction=0.046, pad=0.03)
-    cb.set_label("|tracer - Mitsuba| / Mitsuba", fontsize=8)
+    cb.set_label(label, fontsize=8)
     cb.ax.tick_params(labelsize=7)
     fig.tight_layout()
     fig.savefig(path)

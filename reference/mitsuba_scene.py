@@ -383,15 +383,20 @@ def _comment(text: str) -> str:
     return one_line(text, 200).replace("--", "- -")
 
 
-def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted") -> list[Path]:
+def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
+              jitter: bool = False) -> list[Path]:
     """Write the scene as Mitsuba 3 XML (plus ``meshes/*.obj`` for triangles); return the files.
+
+    ``jitter`` places the samples at random inside their strata (Mitsuba's
+    ``stratified`` sampler with ``jitter``); the default puts them at the
+    strata centres, the tracer's positions.
 
     Mesh files are named after the XML file (``meshes/NAME_shape_2.obj`` for
     ``NAME.xml``), so that scenes exported into one folder keep their own.
     """
     path = Path(path)
     mesh_prefix = path.stem + "_"
-    tree = scene_tree(scene, integrator)
+    tree = scene_tree(scene, integrator, jitter=jitter)
     meshes: list[dict] = []
     body = []
     for key, value in tree.items():

@@ -148,6 +148,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
                                                     second_opinion=second_opinion)
         entry = scene_entry(result)
         entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
+        entry["viewer"] = _scene_viewer(tracer_img, ref_img)
         if scene.has_specular() or scene.samples_lights():
             entry["light_paths"], entry["images"]["light_paths"] = light_paths(scene)
         report.scenes.append(entry)
@@ -167,7 +168,8 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
             f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
     report.seconds = time.perf_counter() - start
     data = report.to_json()
-    data["scenes"] = [{k: v for k, v in s.items() if k != "images"} for s in report.scenes]
+    data["scenes"] = [{k: v for k, v in s.items() if k not in ("images", "viewer")}
+                      for s in report.scenes]
     write_json(out / "report.json", data)
     (out / "report.md").write_text(markdown(report))
     (out / "index.html").write_text(html_page(report, out))
@@ -219,6 +221,20 @@ def _png_bytes(image: np.ndarray, scale: int = 1) -> bytes:
     buf = io.BytesIO()
     img.save(buf, format="PNG")
     return buf.getvalue()
+
+
+def _scene_viewer(tracer_img, ref_img) -> str:
+    """The tev-like viewer of the two renders (reference.viewer)."""
+    from reference.viewer import viewer
+
+    return viewer([("tracer", tracer_img), ("Mitsuba", ref_img)],
+                  "hover for both renders' values; click to flip; wheel to zoom")
+
+
+def _viewer_assets() -> str:
+    from reference.viewer import assets
+
+    return assets()
 
 
 def _scene_images(folder: Path, tracer_img, ref_img) -> dict:
@@ -347,7 +363,7 @@ def html_page(report: Report, outdir: Path) -> str:
     parts = [
         "<!doctype html><html lang='en'><head><meta charset='utf-8'>",
         "<title>whitted accuracy report</title>",
-        f"<style>{_CSS}</style><script>{_ONLOAD}</script></head><body>",
+        f"<style>{_CSS}</style><script>{_ONLOAD}</script>{_viewer_assets()}</head><body>",
         f"<h1>whitted accuracy report: {_verdict(report.passed)}</h1>",
         f"<p class='meta'>{esc(report.date)} &middot; {'quick' if report.quick else 'full'} run "
         f"&middot; {report.seconds:.0f} s &middot; <span id='img-status'></span></p>",
@@ -454,7 +470,7 @@ def _scene_html(s: dict, report: Report) -> str:
             f"<p class='meta'>{s['size'][0]}&times;{s['size'][1]}, {s['spp']} spp, max_depth "
             f"{s['max_depth']}, reference {esc(s.get('reference', ''))} (integrator "
             f"{esc(s['integrator'])}), {sec.get('reference_passes', 1)} reference pass(es)</p>"
-            f"<div class='imgs'>{''.join(figs)}</div>"
+            f"<div class='imgs'>{''.join(figs)}</div>{s.get('viewer', '')}"
             f"<table><tr><th>check ({esc(s['test'])})</th><th>value vs. limit</th>"
             f"<th>result</th></tr>{''.join(rows)}</table>"
             f"<p class='meta'>Why these limits: {esc(s['reason'])}.</p>{second}{dev}"

@@ -170,3 +170,192 @@ def test_report_page_loads_every_image_in_a_real_browser(tmp_path):
     assert pixels.shape[0] >= 2000 and pixels.std() > 20  # a page, not a blank screen
     Path(os.environ.get("WHITTED_SCREENSHOT_DIR", tmp_path)).mkdir(exist_ok=True)
     shutil.copy(shot, Path(os.environ.get("WHITTED_SCREENSHOT_DIR", tmp_path)) / "report.png")
+
+
+# ------------------------------------------------------------------ the viewer, in a browser
+
+
+def _srgb8(x: float) -> int:
+    from tracer.imageio import srgb_encode
+
+    return int(np.round(float(srgb_encode(np.array(x))) * 255))
+
+
+def _numbers(line: str) -> list[float]:
+    return [float(v) for v in line.split(":", 1)[1].split()]
+
+
+def exercise_viewer(b, index: int, first: np.ndarray, second: np.ndarray, names) -> None:
+    """Hover, flip, pick, zoom and reset one viewer with real mouse and key events."""
+    sel = f"document.querySelectorAll('.wv')[{index}]"
+    b.wait(f"{sel} && {sel}.dataset.ready === '1'")
+    b.eval(f"{sel}.scrollIntoView({{block: 'center'}})")
+    rect = b.eval(f"(function(){{var r = {sel}.querySelector('canvas').getBoundingClientRect();"
+                  "return [r.left, r.top, r.width, r.height];})()")
+    h, w = first.shape[:2]
+    diff = np.abs(first - second).sum(-1)
+    y, x = np.unravel_index(np.argmax(diff + 1e-3 * (first.sum(-1) > 0)), diff.shape)
+
+    def at(px, py):   # the centre of pixel (px, py) on the page, unzoomed
+        return rect[0] + (px + 0.5) * rect[2] / w, rect[1] + (py + 0.5) * rect[3] / h
+
+    def canvas_pixel(px, py):
+        return b.eval(f"(function(){{var c = {sel}.querySelector('canvas');"
+                      f"var s = c.width / {w};"
+                      f"return Array.from(c.getContext('2d').getImageData("
+                      f"Math.floor(({px} + 0.5) * s), Math.floor(({py} + 0.5) * s), 1, 1).data)"
+                      ".slice(0, 3);})()")
+
+    # Hover: the pixel, both images' linear values and the relative difference.
+    b.mouse("mouseMoved", *at(x, y))
+    lines = b.wait(f"{sel}.dataset.hover === '{x},{y}' && "
+                   f"{sel}.querySelector('.wv-readout').textContent").split("\n")
+    assert lines[0] == f"pixel {x}, {y}"
+    assert np.allclose(_numbers(lines[1]), first[y, x], rtol=1e-4, atol=1e-7), lines
+    assert np.allclose(_numbers(lines[2]), second[y, x], rtol=1e-4, atol=1e-7), lines
+    ref_sum = np.abs(second).sum(-1)
+    rel = diff[y, x] / max(ref_sum[y, x], 1e-3 * ref_sum.mean())
+    assert float(lines[3].split(":")[1]) == pytest.approx(rel, rel=1e-3, abs=1e-9)
+    # What is drawn is the shown image's value through the sRGB curve.
+    assert b.eval(f"{sel}.dataset.shown") == names[0]
+    assert canvas_pixel(x, y) == [_srgb8(v) for v in first[y, x]]
+    # A click flips to the other image, F flips back, 3 shows the difference, 1 the first.
+    b.click(*at(x, y))
+    assert b.eval(f"{sel}.dataset.shown") == names[1]
+    assert canvas_pixel(x, y) == [_srgb8(v) for v in second[y, x]]
+    b.key("f")
+    assert b.eval(f"{sel}.dataset.shown") == names[0]
+    b.key("3")
+    assert b.eval(f"{sel}.dataset.shown") == "relative difference"
+    b.key("1")
+    assert b.eval(f"{sel}.dataset.shown") == names[0]
+    # E: half a stop brighter.
+    b.key("e")
+    brighter = canvas_pixel(x, y)
+    assert brighter == [_srgb8(v * 2 ** 0.5) for v in first[y, x]]
+    b.key("E")
+    # The wheel zooms around the pointer: the pixel under it stays under it.
+    b.mouse("mouseWheel", *at(x, y), deltaY=-100)
+    assert float(b.eval(f"{sel}.dataset.zoom")) == pytest.approx(1.25)
+    b.mouse("mouseMoved", *at(x, y))
+    assert b.wait(f"{sel}.dataset.hover") == f"{x},{y}"
+    b.key("r")
+    assert float(b.eval(f"{sel}.dataset.zoom")) == 1
+    # Shift + drag: zoom onto the region dragged over (a quarter of the image's width).
+    x0, y0 = w // 4, h // 4
+    b.drag(*at(x0, y0), *at(x0 + w // 4, y0 + h // 4), modifiers=8)
+    zoom = float(b.eval(f"{sel}.dataset.zoom"))
+    ox, oy = (float(v) for v in b.eval(f"{sel}.dataset.view").split(","))
+    assert zoom == pytest.approx(4, rel=0.1)
+    assert (ox, oy) == (pytest.approx(x0 + 0.5, abs=0.6), pytest.approx(y0 + 0.5, abs=0.6))
+    b.mouse("mouseMoved", rect[0] + 1, rect[1] + 1)   # the top left is now that region's
+    assert b.wait(f"{sel}.dataset.hover") == f"{x0},{y0}"
+    b.key("r")
+    # A plain drag pans.
+    b.mouse("mouseWheel", *at(w // 2, h // 2), deltaY=-100)
+    before = b.eval(f"{sel}.dataset.view")
+    b.drag(*at(w // 2, h // 2), *at(w // 2 - 4, h // 2))
+    assert b.eval(f"{sel}.dataset.view") != before
+    assert b.eval(f"{sel}.dataset.shown") == names[0]   # a drag is not a click
+
+
+def _need_browser():
+    from browser import chromium
+
+    exe = chromium()
+    if exe is None:
+        if os.environ.get("WHITTED_REQUIRE_BROWSER"):
+            pytest.fail("chromium is required here (WHITTED_REQUIRE_BROWSER) but missing")
+        pytest.skip("no chromium: `make setup` installs Debian's package where it can")
+    return exe
+
+
+def _offline(page: str) -> None:
+    """Nothing on the page comes from elsewhere: one file."""
+    body = page.lower()
+    assert "src='http" not in body and 'src="http' not in body and "<link" not in body
+    assert "@import" not in body and "url(http" not in body
+
+
+def test_report_viewer_compares_tracer_and_mitsuba_in_a_real_browser(tmp_path):
+    from browser import Browser
+
+    exe = _need_browser()
+    out = tmp_path / "rep"
+    report = build_report(out, [SCENES / "three_lights.toml"], quick=True, log=lambda *_: None,
+                          fresnel=False)
+    page = (out / "index.html").read_text()
+    _offline(page)
+    from tracer.imageio import read_exr
+
+    files = report.scenes[0]["files"]
+    tracer_img, mitsuba_img = read_exr(files["tracer.exr"]), read_exr(files["mitsuba.exr"])
+    with Browser(exe) as b:
+        b.open((out / "index.html").resolve().as_uri())
+        exercise_viewer(b, 0, tracer_img, mitsuba_img, ("tracer", "Mitsuba"))
+
+
+def test_check_page_viewer_in_a_real_browser(tmp_path):
+    from browser import Browser
+
+    exe = _need_browser()
+    from tracer import load_scene
+    from tracer.imageio import write_exr
+    from tracer.integrator import Integrator
+
+    scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(64, 48))
+    img = Integrator(scene).render().image
+    img[36:48, 36:60] *= 1.5                     # a wrong patch of floor: failing pixels
+    assert (img[36:48, 36:60] > 0.01).all()
+    write_exr(tmp_path / "mine.exr", img)
+    r = run_cli("check", tmp_path / "mine.exr", "--scene", "sphere_point", "--size", "64x48",
+                "-o", tmp_path / "ck")
+    assert r.returncode == 1, r.stdout + r.stderr
+    page = (tmp_path / "ck" / "check.html").read_text()
+    _offline(page)
+    from tracer.imageio import read_exr
+
+    ref = read_exr(tmp_path / "ck" / "reference.exr")
+    with Browser(exe) as b:
+        b.open((tmp_path / "ck" / "check.html").resolve().as_uri())
+        exercise_viewer(b, 0, img, ref, ("your image", "reference"))
+        # The difference view outlines the failing pixels (cyan).
+        b.key("r")
+        b.key("3")
+        cyan = b.eval("(function(){var c = document.querySelector('.wv canvas');"
+                      "var s = c.width / 64; var d = c.getContext('2d').getImageData("
+                      "Math.floor(48.5 * s), Math.floor(43.5 * s), 1, 1).data;"
+                      "return [d[0], d[1], d[2]];})()")
+        assert cyan == [0, 255, 255]
+        b.screenshot(tmp_path / "check.png")
+    shots = os.environ.get("WHITTED_SCREENSHOT_DIR")
+    if shots:
+        Path(shots).mkdir(exist_ok=True)
+        shutil.copy(tmp_path / "check.png", Path(shots) / "check.png")
+
+
+def test_suite_page_has_one_working_viewer_per_graded_scene(tmp_path):
+    from browser import Browser
+
+    exe = _need_browser()
+    from tracer import load_scene
+    from tracer.imageio import write_exr
+    from tracer.integrator import Integrator
+
+    images = tmp_path / "imgs"
+    images.mkdir()
+    renders = {}
+    for name in ("sphere_point", "three_lights"):
+        renders[name] = Integrator(load_scene(SCENES / f"{name}.toml")).render().image
+        write_exr(images / f"{name}.exr", renders[name] * (1.03 if name == "three_lights"
+                                                            else 1.0))
+    r = run_cli("suite", "check", images, "--scenes", "[st]*_[pl]*", "-o", tmp_path / "out")
+    assert r.returncode == 1, r.stdout + r.stderr        # three_lights is 3 % too bright
+    page = (tmp_path / "out" / "index.html").read_text()
+    _offline(page)
+    assert page.count("class='wv'") == 2
+    with Browser(exe) as b:
+        b.open((tmp_path / "out" / "index.html").resolve().as_uri())
+        b.wait("document.querySelectorAll('.wv[data-ready=\"1\"]').length === 2")
+        exercise_viewer(b, 1, renders["three_lights"] * 1.03, renders["three_lights"],
+                        ("your image", "reference"))

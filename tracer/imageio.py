@@ -213,17 +213,21 @@ def _atomic_write(path: Path, write) -> None:
             os.unlink(tmp)
 
 
-def write_exr(path: str | Path, image: np.ndarray) -> None:
-    """Linear float32 RGB OpenEXR."""
+def write_exr(path: str | Path, image: np.ndarray,
+              channels: dict[str, np.ndarray] | None = None) -> None:
+    """Linear float32 RGB OpenEXR; ``channels`` adds H x W channels by name (``variance.R``)."""
     import OpenEXR
 
     data = np.ascontiguousarray(image, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
+    planes = {"RGB": data}
+    for name, plane in (channels or {}).items():
+        planes[name] = np.ascontiguousarray(plane, dtype=np.float32)
 
     def write(tmp):
         # Through memory: OpenEXR takes only file names it can encode as UTF-8.
         buf = io.BytesIO()
-        with OpenEXR.File(header, {"RGB": data}) as f:
+        with OpenEXR.File(header, planes) as f:
             f.write(buf)
         Path(tmp).write_bytes(buf.getvalue())
 
@@ -231,13 +235,26 @@ def write_exr(path: str | Path, image: np.ndarray) -> None:
 
 
 def read_exr(path: str | Path) -> np.ndarray:
+    """The R, G, B channels of an OpenEXR file as float32 (H x W x 3)."""
+    channels, _ = read_exr_channels(path)
+    return np.stack([np.asarray(channels[c], dtype=np.float32) for c in "RGB"], axis=-1)
+
+
+def read_exr_channels(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
+    """Every channel of an OpenEXR file by its full name, as stored, and the header.
+
+    Names are OpenEXR's, layers included (``R``, ``G``, ``B``, ``Y``,
+    ``variance.R``); each array is H x W in the file's own type (float16 for
+    HALF, float32 for FLOAT, uint32 for UINT), so that a caller can tell the
+    precision a value was stored with. Read through memory: OpenEXR takes only
+    file names it can encode as UTF-8.
+    """
     import OpenEXR
 
-    with OpenEXR.File(io.BytesIO(Path(path).read_bytes())) as f:
-        ch = f.channels()
-        if "RGB" in ch:
-            return np.asarray(ch["RGB"].pixels, dtype=np.float32)
-        return np.stack([np.asarray(ch[c].pixels, dtype=np.float32) for c in "RGB"], axis=-1)
+    with OpenEXR.File(io.BytesIO(Path(path).read_bytes()), separate_channels=True) as f:
+        channels = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+        header = dict(f.header())
+    return channels, header
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
@@ -290,7 +307,18 @@ def read_ppm(path: str | Path) -> np.ndarray:
     A ``.gz`` file is decompressed first. Comments (``#`` to the end of a line)
     may stand between the header's fields, as netpbm allows. Values above
     maxval, which minray prints for colours above 1, are kept as written
-    rather than refused. Divide by the maxval (255) for linear colours.
+    rather than refused. Divide by the maxval (255) for linear colours
+    (:func:`read_ppm_maxval` returns it).
+    """
+    return read_ppm_maxval(path)[0]
+
+
+def read_ppm_maxval(path: str | Path) -> tuple[np.ndarray, int]:
+    """:func:`read_ppm`'s numbers and the file's maxval (netpbm's ``man 5 ppm``).
+
+    P6 stores one byte per value for a maxval below 256 and two (most
+    significant first) otherwise; P3 stores decimal numbers, which may exceed
+    the maxval (minray's colours above 1).
     """
     import gzip
 
@@ -317,16 +345,25 @@ def read_ppm(path: str | Path) -> np.ndarray:
         w, h, maxval = (int(x) for x in fields[1:])
     except ValueError:
         raise UserError(f"{path}: not a PPM file (bad header)") from None
+    if w < 1 or h < 1 or not 1 <= maxval <= 65535:
+        raise UserError(f"{path}: not a PPM file (size {w} x {h}, maxval {maxval}: expected "
+                        "a positive size and a maxval from 1 to 65535)")
     if magic == b"P6":
-        body = np.frombuffer(raw[pos + 1:], dtype=">u2" if maxval > 255 else np.uint8)
+        body = raw[pos + 1:]
+        wide = maxval > 255
+        body = body[:len(body) - len(body) % 2] if wide else body
+        body = np.frombuffer(body, dtype=">u2" if wide else np.uint8)
     elif magic == b"P3":
         text = b"\n".join(line.split(b"#")[0] for line in raw[pos:].splitlines())
-        body = np.array(text.split(), dtype=np.int64)
+        try:
+            body = np.array(text.split(), dtype=np.int64)
+        except (ValueError, OverflowError):
+            raise UserError(f"{path}: a PPM value is not a whole number") from None
     else:
         raise UserError(f"{path}: not a PPM file (magic {magic[:2]!r}, expected P3 or P6)")
     if body.size < w * h * 3:
         raise UserError(f"{path}: {body.size} values, expected {w * h * 3} ({w} x {h} x 3)")
-    return body[:w * h * 3].astype(np.int64).reshape(h, w, 3)
+    return body[:w * h * 3].astype(np.int64).reshape(h, w, 3), maxval
 
 
 def write_image(path: str | Path, image: np.ndarray) -> None:
