@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tracer import faults
 from tracer.backend import deferred, jit
 from tracer.emitters import base
 
@@ -102,14 +103,19 @@ class _Flat:
 
 class _Parallelogram(_Flat):
     """Mitsuba's rectangle [-1, 1]^2 under to_world: a parallelogram of area 4 |u x v|."""
-    #: area of the local shape: the square [-1, 1]^2
-    local_area = 4.0
 
     def __init__(self, shape):
         c, u, v = shape.corners()
         self.center, self.u, self.v = base.vec(c), base.vec(u), base.vec(v)
         self.n = base.vec(shape.normal())
-        self.area = self.local_area * float(np.linalg.norm(np.cross(u, v)))
+        self.area = self.local_area() * float(np.linalg.norm(np.cross(u, v)))
+
+    @staticmethod
+    def local_area() -> float:
+        """Area of the local shape: the square [-1, 1]^2."""
+        if faults.on("area-pdf-rectangle"):
+            return 1.0   # the unit square taken for Mitsuba's [-1, 1]^2
+        return 4.0
 
     def point(self, u):
         return lights.sample_parallelogram(u, self.center, self.u, self.v)
@@ -117,7 +123,13 @@ class _Parallelogram(_Flat):
 
 class _Ellipse(_Parallelogram):
     """Mitsuba's unit disk under to_world: an ellipse of area pi |u x v|."""
-    local_area = math.pi
+
+    @staticmethod
+    def local_area() -> float:
+        """Area of the local shape: the unit disk."""
+        if faults.on("area-pdf-disk"):
+            return 4.0   # the disk's bounding square
+        return math.pi
 
     def point(self, u):
         return lights.sample_ellipse(u, self.center, self.u, self.v)
