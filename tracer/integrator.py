@@ -243,9 +243,6 @@ class Integrator:
                         u = light_sample(b.pixel, b.s, scene.film.strata, self.seed, depth,
                                          light.index)
                     wi, dist, e = light.sample(p, p_front, u)
-                    tmax = dist * (1 - SHADOW_EPSILON)
-                    if faults.on("shadow-ray-past-light"):
-                        tmax = dr.full(jit.Float, dr.inf, dr.width(p))
                     cos = lights.lambert_cosine(nl, wi)
                     f = mats.eval(wi)
                     active = lit & (cos > 0) & (dr.max(e) > 0)
@@ -255,7 +252,11 @@ class Integrator:
                     origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
                     if faults.on("shadow-acne"):
                         origin = p   # no offset: the shadow ray may hit its own surface
-                    blocked = geo.occluded(origin, wi, tmax, active)
+                    d_shadow, length = light.shadow_ray(p, origin, wi, dist)
+                    tmax = length * (1 - SHADOW_EPSILON)
+                    if faults.on("shadow-ray-past-light"):
+                        tmax = dr.full(jit.Float, dr.inf, dr.width(p))
+                    blocked = geo.occluded(origin, d_shadow, tmax, active)
                     contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                     shadow_masks.append(active)
             if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):

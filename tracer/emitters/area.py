@@ -85,7 +85,11 @@ class _SphereCone:
 
 
 class _Flat:
-    """A flat shape sampled uniformly by area: L cos(theta_l) A / r^2 from its front side."""
+    """A flat shape sampled uniformly by area: L cos(theta_l) A / r^2 from its front side.
+
+    The sample's distance is measured from p (the point is p + dist wi), and
+    the shadow ray is aimed at the point from its origin (:meth:`shadow_ray`).
+    """
     aim = (0.5, 0.5)
 
     def point(self, u):
@@ -98,7 +102,22 @@ class _Flat:
         wi = to_y / dist
         cos_l = -dr.dot(self.n, wi)  # front side emits: the light's normal faces p
         value = dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
-        return wi, dr.norm(y - origin), value
+        return wi, dist, value
+
+    @staticmethod
+    def shadow_ray(p, origin, wi, dist):
+        """From ``origin`` straight to the sampled point p + dist wi (Mitsuba's spawn_ray_to).
+
+        Along wi from the origin, which sits off the surface, the ray would
+        cross the light's own plane short of the point, and where that plane
+        meets the shading point's at a grazing angle, that crossing lies on the
+        light itself, which then shadows its own light (a shift of the offset
+        over the distance to the light's plane, beyond the shadow ray's
+        1e-3 margin).
+        """
+        to = dr.fma(wi, dist, p) - origin
+        length = dr.norm(to)
+        return to / length, length
 
 
 class _Parallelogram(_Flat):
@@ -179,3 +198,9 @@ class Emitter(base.Emitter):
     def sample(self, p, origin, u):
         """(wi, distance, L cos / r^2 / pdf) from one light sample ``u`` per shading point."""
         return self.sampler.sample(self.radiance, p, origin, u)
+
+    def shadow_ray(self, p, origin, wi, dist):
+        """The sampler's shadow ray, if it has its own (flat shapes aim at the point)."""
+        if hasattr(self.sampler, "shadow_ray"):
+            return self.sampler.shadow_ray(p, origin, wi, dist)
+        return wi, dist
