@@ -255,6 +255,12 @@ def format_comparison(c) -> str:
                      f"{so['tracer_seeds']} seeds), test {so['test']}: "
                      f"{'pass' if so['passed'] else 'FAIL'}")
         lines += _check_lines(so["checks"])
+    if getattr(c, "tracer_only_model", None):
+        tm = c.tracer_only_model
+        lines.append(f"tracer-only parts against the harness's model ({', '.join(tm['models'])}"
+                     f", reference {tm['reference']}), test {tm['test']}: "
+                     f"{'pass' if tm['passed'] else 'FAIL'}")
+        lines += _check_lines(tm["checks"])
     if c.expected_deviation:
         e = c.expected_deviation
         lines.append(f"  expected deviation of the full render (tracer-only: "
@@ -384,15 +390,58 @@ def cmd_report(args) -> int:
     _backend(args)
     print(f"whitted report: {len(paths)} scene(s){' (quick)' if args.quick else ''} "
           f"+ Fresnel curves -> {out}/", flush=True)
+    # The formula-bug sweep needs every scene of the folder: a bug no selected scene
+    # reaches would count as missed.
+    sweep = not args.no_mutants and args.scenes is None
     report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
                           reference=args.reference,
-                          second_opinion=False if args.no_second_opinion else None)
+                          second_opinion=False if args.no_second_opinion else None,
+                          mutants=sweep)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
           + ("" if args.no_fresnel else
              f", Fresnel curves {'pass' if report.fresnel_passed else 'FAIL'}")
+          + ("" if report.mutants is None else
+             f", formula bugs {'pass' if report.mutants['pass'] else 'FAIL'}")
           + f"; wrote {out}/index.html, report.md, report.json")
     return EXIT_OK if report.passed else EXIT_FAIL
+
+
+def cmd_mutants(args) -> int:
+    from reference import mutants
+    from reference.report import select_scenes
+    from tracer.errors import UserError
+
+    if args.list:
+        print(mutants.catalog_table())
+        return EXIT_OK
+    chosen = mutants.get(args.only) if args.only else list(mutants.CATALOG)
+    scenes_dir = Path(args.scenes_dir) if args.scenes_dir else SCENES_DIR
+    if not scenes_dir.is_dir():
+        raise UserError(f"{scenes_dir}: no such folder of scenes")
+    paths = select_scenes(scenes_dir, args.scenes)
+    if not paths:
+        raise UserError(f"no scene in {scenes_dir} matches {args.scenes!r}")
+    out = output_folder(args.output) if args.output else None
+    from tracer import load_scene
+
+    for p in paths:  # refuse a bad scene before any rendering
+        load_scene(p)
+    _backend(args)
+    size = "full" if args.full else "quick"
+    print(f"whitted mutants: {len(chosen)} mutant(s) x {len(paths)} scene(s), {size} sizes",
+          flush=True)
+    result = mutants.sweep(paths, chosen, quick=not args.full,
+                           log=lambda m: print(m, flush=True))
+    print(mutants.format_table(result))
+    if out is not None:
+        from reference.compare import write_json
+
+        out.mkdir(parents=True, exist_ok=True)
+        write_json(out / "mutants.json", result.to_json())
+        (out / "mutants.md").write_text(mutants.markdown(result))
+        print(f"wrote {shown(out)}/mutants.json, mutants.md")
+    return EXIT_OK if result.passed else EXIT_FAIL
 
 
 #: Most timed runs per depth of a depth sweep.
@@ -778,6 +827,9 @@ def build_parser() -> argparse.ArgumentParser:
                     help="smaller images (<= 96 px wide), <= 16 spp, fewer reference passes "
                          "and a coarser Fresnel table: minutes instead of tens of minutes")
     rp.add_argument("--no-fresnel", action="store_true", help="skip the Fresnel curves")
+    rp.add_argument("--no-mutants", action="store_true",
+                    help="skip the formula-bug sweep (whitted mutants), which otherwise runs "
+                         "over the same scenes unless --scenes picks some of them")
     rp.add_argument("--reference", choices=("deterministic", "onelobe"), default="deterministic",
                     help="Mitsuba's side of every scene (see whitted compare --help; default "
                          "deterministic)")
@@ -787,6 +839,33 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     rp.set_defaults(func=cmd_report)
+
+    mu = sub.add_parser("mutants", help="check that the comparison catches known formula bugs",
+                        description="Render every scene with the tracer as written and with "
+                                    "each bug of the catalog (reference/mutants.py) switched "
+                                    "on, judge each image as `whitted compare` does, and print "
+                                    "which scenes' verdicts fail for each bug and by how much "
+                                    "(margin: how many times the most violated check exceeds "
+                                    "its limit). Exit 0 when the tracer as written passes "
+                                    "every scene and every bug is caught by at least one, "
+                                    "1 otherwise.")
+    mu.add_argument("--list", action="store_true",
+                    help="print the catalog (id, lecture topic, formula wrong and right) and exit")
+    mu.add_argument("--only", nargs="+", metavar="ID", default=None,
+                    help="only these bugs (ids from --list)")
+    mu.add_argument("--scenes", metavar="GLOB", default=None,
+                    help="only scenes whose file name matches GLOB (bugs that no chosen scene "
+                         "catches then fail the run)")
+    mu.add_argument("--scenes-dir", default=None,
+                    help="folder of scenes (default: the built-in scenes/)")
+    mu.add_argument("--full", action="store_true",
+                    help="the scenes' own sizes, as whitted compare renders them (default: "
+                         "quick sizes, at most 64 pixels wide and 16 spp)")
+    mu.add_argument("-o", "--output", default=None,
+                    help="also write mutants.json and mutants.md into this folder")
+    mu.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
+                    help="Dr.Jit backend")
+    mu.set_defaults(func=cmd_mutants)
 
     ds = sub.add_parser("depth-sweep", help="runtime and rays against recursion depth",
                         description="Render SCENE at each DEPTH (Heckbert's numbering: "

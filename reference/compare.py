@@ -575,6 +575,11 @@ class Comparison:
     #: the one-lobe reference's verdict beside the deterministic one (area-lit scenes):
     #: {"reference", "test", "passed", "checks", "metrics", "reason", "seconds"}
     second_opinion: dict | None = None
+    #: the full render (declared tracer-only parts included) judged against the
+    #: deterministic reference with the harness's own model of those parts, where it has
+    #: one (Schlick's dielectric): {"reference", "models", "test", "passed", "checks",
+    #: "metrics"}
+    tracer_only_model: dict | None = None
 
     def to_json(self) -> dict:
         d = asdict(self)
@@ -677,7 +682,7 @@ def statistical_comparison(scene, tracer_image: np.ndarray | None = None,
     reference's first pass seed.
     """
     from reference.render import render_reference
-    from tracer.integrator import Integrator, material_ids
+    from tracer.integrator import Integrator
 
     if tracer_image is None and not scene.samples_lights():
         tracer_image = Integrator(scene).render().image
@@ -690,6 +695,23 @@ def statistical_comparison(scene, tracer_image: np.ndarray | None = None,
     if passes is None:
         passes = ztest_passes(spp)
     ref = render_reference(scene, integrator, seed=seed, moments=True, passes=passes)
+    return statistical_verdict(scene, ref, tracer_image, tracer_seed)
+
+
+def statistical_verdict(scene, ref, tracer_image: np.ndarray | None = None,
+                        tracer_seed: int = 0, regions: dict | None = None
+                        ) -> StatisticalResult:
+    """Judge the tracer against a sampling reference already rendered (``ref``, with moments).
+
+    The second half of :func:`statistical_comparison`, for callers that judge
+    several tracer images against one reference (``reference/mutants.py``).
+    ``regions`` (rule 4's regions) are computed from the scene when None.
+    """
+    from tracer.integrator import Integrator, material_ids
+
+    if tracer_image is None and not scene.samples_lights():
+        tracer_image = Integrator(scene).render().image
+    spp = scene.film.strata ** 2
     tracer_var = tracer_pass_var = None
     seeds = 1
     if scene.samples_lights():
@@ -697,9 +719,10 @@ def statistical_comparison(scene, tracer_image: np.ndarray | None = None,
         tracer_image, tracer_var, tracer_pass_var = (pooled.image, pooled.variance,
                                                      pooled.pass_variance)
         seeds = pooled.seeds
+    if regions is None:
+        regions = regions_of(material_ids(scene), list(scene.materials))
     noise = Noise(ref.variance, spp * ref.passes, ref.pass_variance, ref.random_fraction,
-                  tracer_var, tracer_pass_var,
-                  regions_of(material_ids(scene), list(scene.materials)))
+                  tracer_var, tracer_pass_var, regions)
     metrics = image_metrics(tracer_image, ref.image)
     verdict, _ = judge("z-test", metrics, tracer_image, ref.image, noise)
     if seeds > 1:
@@ -783,20 +806,24 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
     if reference == "deterministic":
         reason = ("deterministic reference (both lobes of every delta BSDF, the tracer's "
                   "light samples): " + reason)
-    full_image, deviation = tracer_image, None
+    full_image, deviation, model = tracer_image, None, None
     if scene is not full_scene:
         full_image = Integrator(full_scene, seed=seed).render().image
         deviation = asdict(image_metrics(full_image, ref.image))
         reason += ("; tracer-only parts (" + ", ".join(full_scene.tracer_only) +
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
                    "the expected deviation")
+        model = tracer_only_model_check(full_scene, full_image, seed)
+        if model is not None:
+            reason += ("; the full render against the harness's own model of "
+                       f"{', '.join(model['models'])}: {'pass' if model['passed'] else 'FAIL'}")
     used = full_scene.tracer_only_used()
     for part in TRACER_ONLY:
         if part in used and part not in full_scene.tracer_only:
             reason += (f"; this scene uses {part}, which Mitsuba does not model: declare "
                        f"[compare] tracer_only = [\"{part}\"] to check the rest")
     second = None
-    passed = verdict.passed
+    passed = verdict.passed and (model is None or model["passed"])
     if second_opinion is None:
         second_opinion = reference == "deterministic" and scene.samples_lights()
     onelobe_image = None
@@ -824,7 +851,8 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
         spp=tr.spp, size=(scene.film.width, scene.film.height), integrator=integrator,
         backend=backend.name(), max_depth=scene.film.max_depth,
         description=full_scene.description, tracer_only=list(full_scene.tracer_only),
-        expected_deviation=deviation, reference=reference, second_opinion=second)
+        expected_deviation=deviation, reference=reference, second_opinion=second,
+        tracer_only_model=model)
     if outdir is not None:
         from tracer.errors import UserError
 
@@ -850,6 +878,32 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
         result.files = {k: str(out / k) for k in names}
         write_json(out / "metrics.json", result.to_json())
     return result, full_image, ref.image
+
+
+def tracer_only_model_check(full_scene, full_image: np.ndarray, seed: int = 0) -> dict | None:
+    """The full render judged against the harness's model of its declared tracer-only parts.
+
+    Mitsuba has no counterpart of a tracer-only part, so :func:`compare_scene`
+    judges the rest of the scene with the part replaced (:func:`comparable`).
+    Where the harness has a model of its own of the part, written on Mitsuba's
+    API from the formulas (Schlick's dielectric, ``whitted_schlick`` in
+    ``reference/materials/dielectric.py``), the full render is judged against
+    the deterministic reference with that model too, by the same float-precision
+    test, so that a wrong Schlick fails. None where no declared part has a model.
+    """
+    from reference.deterministic import DeterministicReference
+    from reference.materials import has_tracer_only_models, tracer_only_model
+
+    if not has_tracer_only_models(full_scene):
+        return None
+    ref = DeterministicReference(full_scene, seed, models=True).render()
+    metrics = image_metrics(full_image, ref.image)
+    verdict, _ = judge(choose_test(full_scene), metrics, full_image, ref.image)
+    models = sorted({tracer_only_model(m)["type"] for m in full_scene.used_materials()
+                     if m.tracer_only_used() & set(full_scene.tracer_only) and
+                     tracer_only_model(m) is not None})
+    return {"reference": "deterministic", "models": models, "test": verdict.test,
+            "passed": verdict.passed, "checks": verdict.checks, "metrics": asdict(metrics)}
 
 
 def _finite(v):

@@ -149,14 +149,16 @@ class DeterministicResult:
 class DeterministicReference:
     """Renders one scene with Mitsuba's plugins along the whole Whitted ray tree."""
 
-    def __init__(self, scene: Scene, seed: int = 0):
+    def __init__(self, scene: Scene, seed: int = 0, models: bool = False):
+        """``models``: the scene's tracer-only parts as the harness models them (Schlick's
+        dielectric, ``reference/materials/dielectric.py``) instead of Mitsuba's equivalent."""
         from reference import mitsuba
         from reference.mitsuba_scene import load
 
         self.mi = mi = mitsuba()
         self.scene = scene
         self.seed = seed
-        self.ms = load(scene, mi)
+        self.ms = load(scene, mi, models=models)
         self.sensor = self.ms.sensors()[0]
         self.lights = _lights(scene, self.ms, mi)
         self.terms = Terms(mi, self.ms, scene.film.max_depth)

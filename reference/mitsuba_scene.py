@@ -164,8 +164,12 @@ def paraboloid_mesh(par: Paraboloid):
     return verts, faces, normals, uvs.reshape(-1, 2), rings, segments
 
 
-def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape") -> dict:
-    """Plugin tree of a shape; in-memory meshes are ``{"type": "mesh", ...}`` nodes."""
+def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape",
+               models: bool = False) -> dict:
+    """Plugin tree of a shape; in-memory meshes are ``{"type": "mesh", ...}`` nodes.
+
+    ``models``: tracer-only parts as the harness models them (see
+    :func:`reference.materials.bsdf_tree`)."""
     name = f"{prefix}_{index}"
     if isinstance(shape, Sphere):
         # Mitsuba composes to_world x translate(center) x scale(radius): give it the rotation.
@@ -200,7 +204,7 @@ def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape") -> dict:
     else:
         raise TypeError(f"no Mitsuba conversion for {type(shape).__name__}")
     material = scene.material_of(shape)
-    t["bsdf"] = bsdf_tree(material)
+    t["bsdf"] = bsdf_tree(material, models)
     if shape.emitter is not None:
         t["emitter"] = area_tree(shape.emitter)
     elif material is not None and (light := material.light_of(shape)) is not None:
@@ -219,7 +223,7 @@ def integrator_tree(scene: Scene, integrator: str = "whitted", moments: bool = F
 
 
 def scene_tree(scene: Scene, integrator: str = "whitted", moments: bool = False,
-               jitter: bool = False) -> dict:
+               jitter: bool = False, models: bool = False) -> dict:
     tree = {"type": "scene", "sensor": sensor_tree(scene, jitter),
             "integrator": integrator_tree(scene, integrator, moments)}
     for i, light in enumerate(scene.lights):
@@ -229,10 +233,10 @@ def scene_tree(scene: Scene, integrator: str = "whitted", moments: bool = False,
         if gname in used:
             group = {"type": "shapegroup"}
             for i, shape in enumerate(members):
-                group[f"shape_{i}"] = shape_tree(scene, shape, i, f"group_{gname}")
+                group[f"shape_{i}"] = shape_tree(scene, shape, i, f"group_{gname}", models)
             tree[f"group_{gname}"] = group
     for i, shape in enumerate(scene.shapes):
-        tree[f"shape_{i}"] = shape_tree(scene, shape, i)
+        tree[f"shape_{i}"] = shape_tree(scene, shape, i, models=models)
     return tree
 
 
@@ -287,9 +291,12 @@ def to_dict(tree: dict, mi) -> dict:
 
 
 def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False,
-         jitter: bool = False):
-    """The scene as a Mitsuba ``Scene`` object (the variant must already be set)."""
-    return mi.load_dict(to_dict(scene_tree(scene, integrator, moments, jitter), mi))
+         jitter: bool = False, models: bool = False):
+    """The scene as a Mitsuba ``Scene`` object (the variant must already be set).
+
+    ``models``: tracer-only parts as the harness models them, where it has a model
+    (:func:`reference.materials.tracer_only_model`)."""
+    return mi.load_dict(to_dict(scene_tree(scene, integrator, moments, jitter, models), mi))
 
 
 # ------------------------------------------------------------------ XML

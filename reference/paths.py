@@ -156,13 +156,17 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
                     tree.paths.append(glow_letters[::-1] + letters[::-1] + "E")
             if smooth[i]:
                 origin = F[i]
-                for wi_all, dist_all in shadow:
+                for light, (wi_all, dist_all) in zip(emitters, shadow, strict=True):
                     wi, dist = wi_all[i], float(dist_all[i])
                     if float(np.dot(ns, wi)) <= 0:
                         continue
+                    d_s, length = light.shadow_ray(v3(P[i]), v3(origin), v3(wi),
+                                                   jit.Float(dist))
+                    d_s, length = np.asarray(d_s).ravel().astype(np.float64), float(
+                        np.asarray(length).ravel()[0])
                     blocked = bool(np.asarray(geo.occluded(
-                        v3(origin), v3(wi), jit.Float(dist * (1 - SHADOW_EPSILON))))[0])
-                    end = origin + wi * (dist if math.isfinite(dist) else scale)
+                        v3(origin), v3(d_s), jit.Float(length * (1 - SHADOW_EPSILON))))[0])
+                    end = origin + d_s * (length if math.isfinite(length) else scale)
                     tree.segments.append(Segment(origin, end, "blocked" if blocked else
                                                  "shadow", ti))
                     if not blocked:
@@ -501,8 +505,9 @@ def example_paths(scene, exprs=("LDDE", "LSDE"), candidates: int = 400,
                 dist_np = np.asarray(dist).astype(np.float64)
                 cos_y = np.einsum("ij,ij->i", wi_np, hits.nl)
                 lit = ok & (cos_y > 0) & (np.asarray(value).T.max(axis=1) > 0)
-                blocked = np.asarray(geo.occluded(hits.front, wi, dist * (1 - SHADOW_EPSILON),
-                                                  jit.Bool(lit)))
+                d_s, length = light.shadow_ray(hits.si.p, hits.front, wi, dist)
+                blocked = np.asarray(geo.occluded(hits.front, d_s,
+                                                  length * (1 - SHADOW_EPSILON), jit.Bool(lit)))
                 lit &= ~blocked
                 fy = hits.f(wi_np)
                 score = (fx * fy * np.asarray(value).T).sum(axis=1) * cos_x * cos_y

@@ -53,12 +53,15 @@ class Report:
     fresnel: list = field(default_factory=list)       # fresnel summary rows
     fresnel_passed: bool = True
     seconds: float = 0.0
+    #: the formula-bug sweep (reference.mutants.SweepResult.to_json()), or None
+    mutants: dict | None = None
 
     def to_json(self) -> dict:
         return {"pass": self.passed, "quick": self.quick, "date": self.date,
                 "versions": self.versions, "machine": self.machine,
                 "seconds": self.seconds, "scenes": self.scenes,
-                "fresnel_pass": self.fresnel_passed, "fresnel": self.fresnel}
+                "fresnel_pass": self.fresnel_passed, "fresnel": self.fresnel,
+                "mutants": self.mutants}
 
 
 def versions() -> dict:
@@ -125,8 +128,13 @@ def quick_overrides(scene):
 
 def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = False,
                  log=print, fresnel: bool = True, reference: str = "deterministic",
-                 second_opinion: bool | None = None) -> Report:
-    """Compare every scene, tabulate the Fresnel curves, write the three report files."""
+                 second_opinion: bool | None = None, mutants: bool = False) -> Report:
+    """Compare every scene, tabulate the Fresnel curves, write the three report files.
+
+    ``mutants``: also run the formula-bug sweep of :mod:`reference.mutants` over the
+    same scenes (its quick sizes for a quick report, the scenes' own otherwise); the
+    report then passes only if every bug is caught.
+    """
     from reference.compare import compare_scene
     from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
     from tracer import load_scene
@@ -166,6 +174,18 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         report.passed &= table.passed
         log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
             f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    if mutants:
+        from reference import mutants as mutant_sweep
+
+        t0 = time.perf_counter()
+        log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
+            f"({'quick' if quick else 'full'} sizes)")
+        sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m))
+        report.mutants = sweep.to_json()
+        report.passed &= sweep.passed
+        log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
+            f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
+            f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
     report.seconds = time.perf_counter() - start
     data = report.to_json()
     data["scenes"] = [{k: v for k, v in s.items() if k not in ("images", "viewer")}
@@ -204,6 +224,7 @@ def scene_entry(c) -> dict:
             "seconds": d["seconds"], "size": d["size"], "spp": d["spp"],
             "max_depth": d["max_depth"], "integrator": d["integrator"],
             "reference": d["reference"], "second_opinion": d["second_opinion"],
+            "tracer_only_model": d.get("tracer_only_model"),
             "backend": d["backend"], "description": d["description"],
             "light_paths": None,
             "tracer_only": d["tracer_only"], "expected_deviation": d["expected_deviation"],
@@ -284,6 +305,10 @@ def markdown(report: Report) -> str:
         if so:
             checks += (f"; second opinion ({so['reference']}, {so['test']}): "
                        f"{_checks_text(so['checks'])}")
+        tm = s.get("tracer_only_model")
+        if tm:
+            checks += (f"; full render against the harness's {', '.join(tm['models'])} "
+                       f"({tm['test']}): {_checks_text(tm['checks'])}")
         m = s["metrics"]
         sec = s["seconds"]
         ratio = sec.get("ratio_mitsuba_over_tracer")
@@ -313,7 +338,36 @@ def markdown(report: Report) -> str:
                 f"{f['worst_plugin_deviation_in_half_intervals']:.2f} | "
                 f"{f['max_abs_schlick_minus_exact']:.4f} | {f['schlick_worst_theta_deg']:.1f} | "
                 f"{'pass' if ok else '**FAIL**'} |")
+    if report.mutants:
+        lines += ["", _mutants_markdown(report.mutants)]
     lines.append("")
+    return "\n".join(lines)
+
+
+def _margin(x) -> str:
+    return "inf (NaN)" if x is None or x == float("inf") else f"{x:.3g}"
+
+
+def _mutants_markdown(mu: dict) -> str:
+    """The formula-bug section of report.md."""
+    lines = [f"## Formula bugs: {'PASS' if mu['pass'] else '**FAIL**'}", "",
+             f"{len(mu['mutants'])} plausible bugs of the lectures' formulas "
+             "(`reference/mutants.py`, `whitted mutants --list`), each switched into the "
+             f"tracer in turn and judged on every scene as `whitted compare` judges it, at "
+             f"{'quick' if mu['quick'] else 'full'} sizes ({mu['seconds']:.0f} s). The "
+             f"tracer as written passes {sum(s['passed'] for s in mu['scenes'])} of "
+             f"{len(mu['scenes'])} scenes. Margin: how many times the most violated check of "
+             "a failing verdict exceeds its limit.", "",
+             "| mutant | lecture topic | seen by | scenes failing | strongest (margin) | "
+             "weakest (margin) |", "|---|---|---|---|---|---|"]
+    for m in mu["mutants"]:
+        best, worst = m["strongest"], m["weakest"]
+        lines.append(
+            f"| `{m['id']}` | {m['topic']} | {', '.join(m['references'])} | "
+            f"{len(m['caught_by'])} | "
+            + (f"{best['scene']} ({_margin(best['margin'])}) | "
+               f"{worst['scene']} ({_margin(worst['margin'])})" if best else
+               "**NOT CAUGHT** | ") + " |")
     return "\n".join(lines)
 
 
@@ -417,6 +471,8 @@ def html_page(report: Report, outdir: Path) -> str:
         parts.append(_scene_html(s, report))
     if report.fresnel:
         parts.append(_fresnel_html(report, outdir))
+    if report.mutants:
+        parts.append(_mutants_html(report.mutants))
     parts.append("</body></html>\n")
     return "\n".join(parts)
 
@@ -435,6 +491,13 @@ def _scene_html(s: dict, report: Report) -> str:
                   f"the mean of {so['tracer_seeds']} seeds): {_verdict(so['passed'])}</p>"
                   f"<table><tr><th>check ({esc(so['test'])})</th><th>value vs. limit</th>"
                   f"<th>result</th></tr>{''.join(_check_rows(so['checks']))}</table>")
+    tm = s.get("tracer_only_model")
+    if tm:
+        second += (f"<p>The full render, tracer-only parts included, against the "
+                   f"deterministic reference with the harness's own model of them "
+                   f"({esc(', '.join(tm['models']))}): {_verdict(tm['passed'])}</p>"
+                   f"<table><tr><th>check ({esc(tm['test'])})</th><th>value vs. limit</th>"
+                   f"<th>result</th></tr>{''.join(_check_rows(tm['checks']))}</table>")
     m = s["metrics"]
     flip = "n/a" if m.get("flip") is None else f"{m['flip']:.4f}"
     figs = [f"<figure>{_img(imgs['tracer'], 'render', 'tracer')}<figcaption>tracer"
@@ -521,3 +584,55 @@ def _fresnel_html(report: Report, outdir: Path) -> str:
             "mi.fresnel</th><th>plugin vs exact</th><th>Schlick error</th><th>result</th></tr>"
             + "".join(rows) + "</table>")
 
+
+
+def _mutants_html(mu: dict) -> str:
+    """The formula-bug section: one row per bug, then the bug x scene matrix of margins."""
+    esc = html.escape
+    names = [s["name"] for s in mu["scenes"]]
+    rows = []
+    for m in mu["mutants"]:
+        best, worst = m["strongest"], m["weakest"]
+        caught = (f"{esc(best['scene'])} ({_margin(best['margin'])}, {esc(best['check'])})"
+                  if best else "<span class='fail'>NOT CAUGHT</span>")
+        weak = f"{esc(worst['scene'])} ({_margin(worst['margin'])})" if worst else ""
+        rows.append(f"<tr><td><code>{esc(m['id'])}</code></td><td>{esc(m['summary'])}</td>"
+                    f"<td>{esc(m['topic'])}</td><td>{esc(', '.join(m['references']))}</td>"
+                    f"<td>{len(m['caught_by'])}</td><td>{caught}</td><td>{weak}</td></tr>")
+    grid = []
+    for m in mu["mutants"]:
+        by = {c["scene"]: c for c in m["caught_by"]}
+        cells = []
+        for n in names:
+            if n in by:
+                cells.append(f"<td class='fail'>{_margin(by[n]['margin'])}</td>")
+            elif n in m["passed"]:
+                cells.append("<td>.</td>")
+            elif n in m["blind"]:
+                cells.append("<td>b</td>")
+            else:
+                cells.append("<td></td>")
+        grid.append(f"<tr><td><code>{esc(m['id'])}</code></td>{''.join(cells)}</tr>")
+    head = "".join(f"<th>{esc(n)}</th>" for n in names)
+    clean = "".join(f"<td>{'pass' if s['passed'] else 'FAIL'} "
+                    f"({max(v['margin'] for v in s['verdicts']):.2f})</td>"
+                    for s in mu["scenes"])
+    return ("<h2 id='mutants'>Formula bugs: " + _verdict(mu["pass"]) + "</h2>"
+            f"<p>{len(mu['mutants'])} plausible bugs of the lectures' formulas "
+            "(<code>reference/mutants.py</code>), each switched into the tracer in turn "
+            "(<code>tracer/faults.py</code>: no file is edited) and judged on every scene "
+            "as <code>whitted compare</code> judges it, at "
+            f"{'quick' if mu['quick'] else 'full'} sizes, in {mu['seconds']:.0f} s. A bug is "
+            "caught by a scene whose verdict fails; its <b>margin</b> is how many times the "
+            "most violated check exceeds its limit. Bugs in code the deterministic reference "
+            "shares with the tracer (its pixel positions and light samples) are seen only "
+            "by the one-lobe reference, which runs on scenes with area lights.</p>"
+            "<table><tr><th>mutant</th><th>bug</th><th>lecture topic</th><th>seen by</th>"
+            "<th>scenes failing</th><th>strongest catch (margin, check)</th>"
+            "<th>weakest catch</th></tr>" + "".join(rows) + "</table>"
+            "<p>Margins per scene (a number: the scene's verdict fails; <code>.</code>: the "
+            "bug reaches the scene and its verdict passes; <code>b</code>: only verdicts "
+            "blind to it reach it; empty: the scene never runs the formula). Last row: the "
+            "tracer as written, with its largest check / limit.</p>"
+            f"<div style='overflow-x:auto'><table><tr><th>mutant</th>{head}</tr>"
+            + "".join(grid) + f"<tr><td><b>tracer as written</b></td>{clean}</tr></table></div>")

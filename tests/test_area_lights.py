@@ -105,3 +105,50 @@ def test_area_and_solid_angle_measures_convert_by_r2_over_cos(jit):
     assert abs(cone_est - expected) < 5 * cone_se + 1e-6
     # Solid angle sampling has far less variance for a small, distant sphere.
     assert cone_se < se
+
+
+def test_flat_area_light_never_shadows_its_own_sample_at_grazing_angles(jit):
+    # A triangle light tilted so that its plane meets the floor along a line: floor points
+    # just in front of that line see the light at grazing angles. The shadow ray starts
+    # off the floor (the ray offset); aimed along wi from there, it would cross the
+    # light's plane short of the sample, on the light itself, and the light would shadow
+    # its own light (the tracer did, before shadow_ray aimed at the sample). Aimed at the
+    # sample from the offset origin, as Mitsuba's spawn_ray_to does, it never is.
+    from tracer.geometry import Geometry, spawn_offset
+    from tracer.integrator import SHADOW_EPSILON
+    from tracer.scene import parse_scene
+
+    scene = parse_scene({
+        "camera": {"origin": [0, 1, 5], "target": [0, 0, 0]},
+        "shapes": [{"type": "triangle", "emitter": {"radiance": [1, 1, 1]},
+                    "vertices": [[1.097, 1.626, -0.749], [1.813, 2.187, -0.466],
+                                 [0.99, 2.187, 0.014]]}]})
+    light = AreaLight(scene.shapes[0], 0)
+    geo = Geometry(scene)
+    n = 4096
+    rng = np.random.default_rng(1)
+    # Floor points (y = 0) near where the light's plane meets the floor, on its front side.
+    c, nl = np.array([1.3, 2.0, -0.4]), np.array([0.3425, -0.73337, 0.58725])
+    pts = []
+    while len(pts) < n:
+        q = np.array([rng.uniform(-1, 6), 0.0, rng.uniform(-8, 2)])
+        if 0 < np.dot(q - c, nl) < 0.3:
+            pts.append(q)
+    p = jit.Array3f(*np.asarray(pts, np.float32).T)
+    origin = p + jit.Array3f(0, 1, 0) * spawn_offset(p)
+    wi, dist, value = light.sample(p, origin, _u(jit, n))
+    lit = np.asarray(value)[0] > 0
+    assert lit.mean() > 0.9            # the light's front side faces these points
+    d, length = light.shadow_ray(p, origin, wi, dist)
+    blocked = np.asarray(geo.occluded(origin, d, length * (1 - SHADOW_EPSILON)))
+    # Below cos(theta_l) ~ 1e-4 the point p + dist wi, recomputed in float32 (an error of
+    # ~1e-6), may lie beyond the ray's end margin of 1e-3 x length x cos(theta_l); such
+    # samples carry under 1e-3 of a head-on sample's light, which no check can see.
+    cos_l = -np.asarray(wi).T.astype(np.float64) @ nl
+    clear = lit & (cos_l > 1e-3)
+    assert clear.mean() > 0.8
+    assert not blocked[clear].any()
+    # The configuration is the grazing one: along wi, as far as the sample, the ray
+    # would have met the light itself for a good part of the points.
+    along = np.asarray(geo.occluded(origin, wi, dist * (1 - SHADOW_EPSILON)))
+    assert along[clear].mean() > 0.2

@@ -331,3 +331,40 @@ def test_new_rays_start_where_mitsubas_start_them(mi, jit):
     side = dr.select(dr.dot(N, D) >= 0, N, -N)
     ours = np.asarray(dr.fma(side, spawn_offset(P), P))
     assert np.array_equal(ours, theirs)
+
+
+@pytest.mark.parametrize("ior", [1.33, 1.5, 2.42])
+@pytest.mark.parametrize("side", [1.0, -1.0], ids=["outside", "inside"])
+def test_schlick_model_gives_schlicks_reflectance_and_snells_direction(mi, jit, ior, side):
+    # The harness's own model of a declared Schlick dielectric (whitted_schlick): R from
+    # Schlick's formula with the cosine on the less dense side, computed here in float64,
+    # and the refracted direction and (n_i / n_t)^2 scale of Mitsuba's own dielectric.
+    # The tracer's Schlick (tracer.fresnel) must agree with the same float64 formula.
+    from tracer import fresnel
+
+    schlick = mi.load_dict({"type": "whitted_schlick", "int_ior": ior, "ext_ior": 1.0})
+    exact = mi.load_dict({"type": "dielectric", "int_ior": ior, "ext_ior": 1.0})
+    theta = np.radians(np.arange(0.0, 89.6, 0.5))
+    cos_i = (side * np.cos(theta)).astype(np.float32).astype(np.float64)
+    rel = np.where(cos_i > 0, ior, 1 / ior)                      # n_t / n_i
+    sin2_t = (1 - cos_i ** 2) / rel ** 2
+    tir = sin2_t > 1
+    cos_t = np.sqrt(np.maximum(1 - sin2_t, 0))
+    r0 = ((ior - 1) / (ior + 1)) ** 2
+    r64 = np.where(tir, 1.0, r0 + (1 - r0) * (1 - np.where(rel >= 1, np.abs(cos_i), cos_t)) ** 5)
+    w_r, pdf_r, wo_r = _one_lobe(mi, schlick, cos_i, mi.BSDFFlags.DeltaReflection)
+    w_t, pdf_t, wo_t = _one_lobe(mi, schlick, cos_i, mi.BSDFFlags.DeltaTransmission)
+    _, _, wo_exact = _one_lobe(mi, exact, cos_i, mi.BSDFFlags.DeltaTransmission)
+    # Near the critical angle cos_t = sqrt(1 - sin^2) magnifies float32 rounding: the same
+    # bound as for the exact equations (reference.fresnel_curves.float32_tolerance).
+    tol = float32_tolerance(cos_i, ior)
+    assert np.all(pdf_r == 1) and np.all(np.abs(w_r - r64) <= tol)
+    assert np.allclose(wo_r[2], cos_i, atol=1e-6)
+    ok = ~tir
+    assert np.all(pdf_t[ok] == 1) and np.all(w_t[tir] == 0)
+    assert np.all(np.abs(w_t[ok] - (1 - r64[ok]) / rel[ok] ** 2) <= tol[ok] / rel[ok] ** 2 +
+                  16 * 2.0 ** -24)
+    assert np.allclose(wo_t[:, ok], wo_exact[:, ok], atol=1e-5)
+    ours = np.asarray(fresnel.fresnel_schlick(jit.Float(cos_i.astype(np.float32)),
+                                              jit.Float(np.float32(ior))), dtype=np.float64)
+    assert np.all(np.abs(ours - r64) <= tol)

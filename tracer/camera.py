@@ -35,6 +35,7 @@ import math
 import drjit as dr
 import numpy as np
 
+from tracer import faults
 from tracer.backend import jit
 from tracer.scene import Camera
 
@@ -61,10 +62,14 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         film_x, film_y = film_x + dx, film_y + dy
     sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
     sy = 1 - 2 * (film_y / height)         # +1 top .. -1 bottom
+    if faults.on("camera-y-not-flipped"):
+        sy = 2 * (film_y / height) - 1
     eye = _vec(camera.origin)
     if camera.type == "perspective":
         tan_half = math.tan(math.radians(camera.fov) / 2)
         d = f + (sx * tan_half) * r + (sy * tan_half / aspect) * up
+        if faults.on("fov-vertical-for-horizontal"):
+            d = f + (sx * tan_half * aspect) * r + (sy * tan_half) * up
         length = dr.norm(d)               # = 1 / cos(angle to the axis)
         d = d / length
         near_t = camera.near_clip * length
@@ -72,6 +77,8 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         tmax = camera.far_clip * length - near_t
     else:
         half = camera.width / 2
+        if faults.on("ortho-width-as-half"):
+            half = camera.width
         o = eye + (sx * half) * r + (sy * half / aspect) * up + camera.near_clip * f
         d = f + dr.zeros(jit.Array3f, dr.width(film_x))
         tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))

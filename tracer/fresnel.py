@@ -14,6 +14,8 @@ Rendering", 4th ed., section 9.5 (dielectric BSDF).
 
 import drjit as dr
 
+from tracer import faults
+
 
 def _sides(cos_i, eta):
     """(|cos_i|, n_t / n_i) for a ray arriving on the side given by the sign of cos_i."""
@@ -28,8 +30,15 @@ def snell_cos_t(cos_i, eta):
     where that exceeds 1, i.e. beyond the critical angle asin(n_t / n_i).
     """
     c, rel = _sides(cos_i, eta)
+    return _snell(c, rel)
+
+
+def _snell(c, rel):
+    """(|cos theta_t|, TIR mask) for |cos theta_i| = c and rel = n_t / n_i."""
     sin2_t = (1 - c * c) / (rel * rel)
     tir = sin2_t > 1
+    if faults.on("tir-ignored"):
+        return dr.sqrt(dr.abs(1 - sin2_t)), sin2_t != sin2_t
     return dr.sqrt(dr.maximum(1 - sin2_t, 0)), tir
 
 
@@ -42,11 +51,15 @@ def fresnel_exact(cos_i, eta):
     internal reflection. R + T = 1. Equal indices give R = 0 at every angle
     (no boundary at all, which also settles the 0/0 of grazing incidence).
     """
+    if faults.on("schlick-for-exact"):
+        return fresnel_schlick(cos_i, eta)
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
     r_s = (c - rel * cos_t) / (c + rel * cos_t)
     r_p = (rel * c - cos_t) / (rel * c + cos_t)
     r = 0.5 * (r_s * r_s + r_p * r_p)
+    if faults.on("fresnel-average-amplitudes"):
+        r = dr.square(0.5 * (r_s + r_p))
     r = dr.select(tir, 1.0, r)
     return dr.select(rel == 1, 0.0, r)
 
@@ -71,6 +84,8 @@ def fresnel_schlick(cos_i, eta):
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
     cos_light = dr.select(rel >= 1, c, cos_t)
+    if faults.on("schlick-dense-side-cosine"):
+        cos_light = c
     r0 = schlick_r0(eta)
     r = r0 + (1 - r0) * (1 - cos_light) ** 5
     return dr.select(tir, 1.0, r)
@@ -82,6 +97,8 @@ def reflect(d, n):
     Law of reflection: angle of incidence equals angle of reflection, in the
     plane of d and n: r = d - 2 (d . n) n.
     """
+    if faults.on("reflect-sign"):
+        return d + 2 * dr.dot(d, n) * n
     return d - 2 * dr.dot(d, n) * n
 
 
@@ -97,7 +114,12 @@ def refract(d, n, eta):
     cos_i = -dr.dot(d, n)
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
+    if faults.on("snell-eta-inverted"):
+        rel = dr.rcp(rel)
+        cos_t, tir = _snell(c, rel)
     n_facing = dr.select(cos_i >= 0, n, -n)
+    if faults.on("normal-not-flipped-inside"):
+        n_facing = n
     inv = dr.rcp(rel)
     t = inv * d + (inv * c - cos_t) * n_facing
     return t, tir

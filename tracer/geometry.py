@@ -33,6 +33,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
+from tracer import faults
 from tracer.backend import jit
 from tracer.scene import (
     Cylinder,
@@ -196,6 +197,8 @@ class _SphereBlock(_TableBlock):
         p = dr.fma(d, t, o)
         n = dr.normalize(p - c)
         p = dr.fma(n, r, c)  # re-project onto the sphere: the error stays relative to r
+        if faults.on("unnormalized-normal"):
+            n = n * r   # the gradient p - c, not divided by r
         # Local direction R^T n (columns of R are the local axes in world space).
         local = jit.Array3f(dr.dot(dr.gather(jit.Array3f, self.r0, k, mask), n),
                             dr.dot(dr.gather(jit.Array3f, self.r1, k, mask), n),
@@ -385,10 +388,12 @@ class _MeshBlock(_Block):
         n = dr.gather(jit.Array3f, self.face_n, k, mask)
         ns = n
         if self.vn is not None:  # barycentric interpolation of the vertex normals
-            ns = dr.normalize(tri_f.interpolate(
+            ns = tri_f.interpolate(
                 beta, gamma, dr.gather(jit.Array3f, self.vn, i0, mask),
                 dr.gather(jit.Array3f, self.vn, i1, mask),
-                dr.gather(jit.Array3f, self.vn, i2, mask)))
+                dr.gather(jit.Array3f, self.vn, i2, mask))
+            if not faults.on("normal-not-renormalized"):
+                ns = dr.normalize(ns)
         if self.vt is not None:
             uv = tri_f.interpolate(beta, gamma, dr.gather(jit.Array2f, self.vt, i0, mask),
                                    dr.gather(jit.Array2f, self.vt, i1, mask),
@@ -406,7 +411,7 @@ class _InstanceBlock(_Block):
         self.count = child.count
         m = np.asarray(inst.to_world, dtype=np.float64)
         self.m, self.inv = m, np.linalg.inv(m)
-        self.normal_m = np.linalg.inv(m[:3, :3]).T
+        self.normal_m = instance_normal_matrix(m)
 
     def _to_object(self, o, d):
         ol = _affine(self.inv, o)
@@ -478,7 +483,7 @@ class _InstanceSetBlock(_Block):
         self.count = self.n * child.count
         m = np.asarray([inst.to_world for inst in instances], dtype=np.float64)
         inv = np.linalg.inv(m)
-        normal = np.transpose(np.linalg.inv(m[:, :3, :3]), (0, 2, 1))
+        normal = instance_normal_matrix(m)
         self.m_rows, self.m_t = [_v3(m[:, r, :3]) for r in range(3)], _v3(m[:, :3, 3])
         self.inv_rows, self.inv_t = [_v3(inv[:, r, :3]) for r in range(3)], _v3(inv[:, :3, 3])
         self.normal_rows = [_v3(normal[:, r, :]) for r in range(3)]
@@ -576,6 +581,21 @@ class _InstanceSetBlock(_Block):
         n = dr.normalize(self._apply(self.normal_rows, None, inst, s.n, mask))
         ns = dr.normalize(self._apply(self.normal_rows, None, inst, s.ns, mask))
         return p, n, ns, s.uv
+
+
+def instance_normal_matrix(m: np.ndarray) -> np.ndarray:
+    """The 3x3 matrix that takes an instance's normals to world space: (M^-1)^T.
+
+    Lecture 2, "Instancing" / "Intersecting transformed objects": points go by
+    M, but a normal must stay perpendicular to the transformed tangents t,
+    (A n) . (M t) = 0 for all t with n . t = 0, which holds for A = (M^-1)^T;
+    M itself only works for rotations and uniform scales. ``m``: a 4x4
+    to_world matrix or a stack of them (..., 4, 4).
+    """
+    m3 = np.asarray(m, dtype=np.float64)[..., :3, :3]
+    if faults.on("instance-normal-by-matrix"):
+        return m3.copy()
+    return np.swapaxes(np.linalg.inv(m3), -1, -2)
 
 
 def _slab(o, inv, lx, ly, lz, hx, hy, hz):

@@ -49,7 +49,7 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from tracer import backend, lights
+from tracer import backend, faults, lights
 from tracer.backend import jit
 from tracer.camera import generate_rays
 from tracer.emitters import area, scene_emitters
@@ -218,6 +218,8 @@ class Integrator:
             # the surface along the geometric normal.
             cos_sh = -dr.dot(n_sh, b.d)
             nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
+            if faults.on("backface-not-flipped"):
+                nl = n_sh
             ng = dr.select(cos_o >= 0, n, -n)
             off = spawn_offset(p)
             if self.offset_scale != 1.0:
@@ -241,7 +243,6 @@ class Integrator:
                         u = light_sample(b.pixel, b.s, scene.film.strata, self.seed, depth,
                                          light.index)
                     wi, dist, e = light.sample(p, p_front, u)
-                    tmax = dist * (1 - SHADOW_EPSILON)
                     cos = lights.lambert_cosine(nl, wi)
                     f = mats.eval(wi)
                     active = lit & (cos > 0) & (dr.max(e) > 0)
@@ -249,7 +250,13 @@ class Integrator:
                     # spawn_ray_to does): with interpolated normals a lit direction can lie
                     # behind the geometric surface near a shadow terminator.
                     origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
-                    blocked = geo.occluded(origin, wi, tmax, active)
+                    if faults.on("shadow-acne"):
+                        origin = p   # no offset: the shadow ray may hit its own surface
+                    d_shadow, length = light.shadow_ray(p, origin, wi, dist)
+                    tmax = length * (1 - SHADOW_EPSILON)
+                    if faults.on("shadow-ray-past-light"):
+                        tmax = dr.full(jit.Float, dr.inf, dr.width(p))
+                    blocked = geo.occluded(origin, d_shadow, tmax, active)
                     contrib += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                     shadow_masks.append(active)
             if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):

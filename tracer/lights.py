@@ -22,9 +22,15 @@ import math
 
 import drjit as dr
 
+from tracer import faults
+
 
 def inverse_square(intensity, dist):
     """Irradiance-like factor I / r^2 of a point source at distance r (W/sr / m^2)."""
+    if faults.on("point-light-no-falloff"):
+        return intensity + 0 * dist
+    if faults.on("point-light-linear-falloff"):
+        return intensity / dist
     return intensity / (dist * dist)
 
 
@@ -44,6 +50,12 @@ def spot_falloff(cos_theta, cutoff_deg: float, beam_deg: float):
         ramp = (cutoff - dr.acos(dr.clip(cos_theta, -1, 1))) / (cutoff - beam)
     else:
         ramp = dr.zeros(type(cos_theta), dr.width(cos_theta))
+    if faults.on("spot-linear-falloff"):
+        ramp = ((cos_theta - math.cos(cutoff)) / (math.cos(beam) - math.cos(cutoff))
+                if cutoff > beam else ramp)
+    if faults.on("spot-smoothstep-falloff") and cutoff > beam:
+        x = dr.clip((cos_theta - math.cos(cutoff)) / (math.cos(beam) - math.cos(cutoff)), 0, 1)
+        ramp = x * x * (3 - 2 * x)
     value = dr.select(inside, 1.0, ramp)
     return dr.select(cos_theta > math.cos(cutoff), value, 0.0)
 
@@ -57,6 +69,8 @@ def spot(p, position, axis, intensity, cutoff_deg: float, beam_deg: float):
 
 def directional(p, direction, irradiance):
     """(wi, inf, E): light travelling along the unit ``direction``."""
+    if faults.on("directional-light-reversed"):
+        direction = -direction
     wi = -direction + dr.zeros(type(p), dr.width(p))
     return wi, dr.full(type(p.x), dr.inf, dr.width(p)), irradiance
 
@@ -83,11 +97,17 @@ def sphere_centre(p, origin, center, radius, value):
     # The near root -b - sqrt(disc); where rounding leaves no root (a grazing
     # origin), the distance to the tangent point.
     dist = -b - dr.sqrt(dr.maximum(disc, 0))
+    if faults.on("heckbert-light-inverse-square"):
+        value = value / (dc * dc)
     return wi, dist, dr.select(dc > radius, value, 0)
 
 
 def lambert_cosine(n, wi):
     """Lambert's cosine law with clamping: max(n . wi, 0) for unit vectors."""
+    if faults.on("lambert-no-cosine"):
+        return dr.select(dr.dot(n, wi) > 0, 1.0, 0.0)
+    if faults.on("lambert-abs-cosine"):
+        return dr.abs(dr.dot(n, wi))
     return dr.maximum(dr.dot(n, wi), 0)
 
 
@@ -131,6 +151,8 @@ def sample_triangle(sample, p0, e1, e2):
     beta = 1 - sqrt(u1), gamma = u2 sqrt(u1) is uniform in area over the triangle.
     """
     su = dr.sqrt(sample.x)
+    if faults.on("triangle-warp-no-sqrt"):
+        su = sample.x
     return p0 + (1 - su) * e1 + (sample.y * su) * e2
 
 
@@ -156,6 +178,10 @@ def sample_cone(sample, cos_max, one_minus_cos_max=None):
     phi = 2 * math.pi * sample.y
     s, c = dr.sincos(phi)
     pdf = 1 / (2 * math.pi * omc)
+    if faults.on("area-pdf-sphere-cone"):
+        pdf = 1 / (math.pi * omc)
+    if faults.on("sphere-cone-disk-solid-angle"):
+        pdf = 1 / (math.pi * omc * (2 - omc))
     return c * sin_t, s * sin_t, cos_t, pdf
 
 

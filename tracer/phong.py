@@ -35,6 +35,8 @@ import math
 
 import drjit as dr
 
+from tracer import faults
+
 MODELS = ("phong", "blinn-phong")
 
 
@@ -86,6 +88,8 @@ def _cos_power(c, exponent):
 def phong_lobe(n, wi, wo, exponent):
     """N(p) cos^p(alpha), alpha the angle between wo and the mirror direction of wi (no ks)."""
     cos_alpha = dr.dot(reflect_about(n, wi), wo)
+    if faults.on("phong-no-normalization"):
+        return _cos_power(cos_alpha, exponent)
     return phong_normalization(exponent) * _cos_power(cos_alpha, exponent)
 
 
@@ -95,6 +99,10 @@ def blinn_phong_lobe(n, wi, wo, exponent):
     Only called with both directions above the surface, where wi + wo != 0.
     """
     h = dr.normalize(wi + wo)
+    if faults.on("half-vector-unnormalized"):
+        h = wi + wo
+    if faults.on("blinn-phong-with-phong-normalization"):
+        return phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent)
     return blinn_phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent)
 
 

@@ -19,6 +19,7 @@ import hashlib
 
 import drjit as dr
 
+from tracer import faults
 from tracer.backend import jit
 
 
@@ -70,6 +71,9 @@ def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
     inv = 1.0 / n
     film_x = jit.Float(px) + (jit.Float(sx) + 0.5) * inv
     film_y = jit.Float(py) + (jit.Float(sy) + 0.5) * inv
+    if faults.on("pixel-sample-corner"):
+        film_x = jit.Float(px) + jit.Float(sx) * inv
+        film_y = jit.Float(py) + jit.Float(sy) * inv
     return pixel, s, film_x, film_y
 
 
@@ -102,6 +106,9 @@ def stratified_2d(pixel, s, n: int, dimension: int):
     h1 = pcg_hash(key ^ (s * 0x85EBCA6B + 0x68E31DA4))
     h2 = pcg_hash(h1 + 0x632BE5AB)
     inv = 1.0 / n
+    if faults.on("light-sample-same-uv"):
+        x = (jit.Float(cx) + uniform(h1)) * inv
+        return jit.Array2f(x, x)
     return jit.Array2f((jit.Float(cx) + uniform(h1)) * inv, (jit.Float(cy) + uniform(h2)) * inv)
 
 

@@ -2,6 +2,8 @@
 
 import drjit as dr
 
+from tracer import faults
+
 
 def checkerboard(uv, scale, color0, color1):
     """color0 where frac(u') > 1/2 equals frac(v') > 1/2, else color1, with (u', v') = scale * uv.
@@ -12,6 +14,8 @@ def checkerboard(uv, scale, color0, color1):
     """
     u = uv.x * scale.x
     v = uv.y * scale.y
+    if faults.on("checkerboard-uv-swap"):
+        u, v = uv.y * scale.x, uv.x * scale.y
     mu = (u - dr.floor(u)) > 0.5
     mv = (v - dr.floor(v)) > 0.5
     return dr.select(mu == mv, color0, color1)

@@ -47,9 +47,35 @@ def convert(material, renderer: str = "mitsuba"):
     return fn(material)
 
 
-def bsdf_tree(material) -> dict:
-    """The Mitsuba BSDF of a material (None: a pure emitter, black)."""
-    return BLACK if material is None else convert(material, "mitsuba")
+def bsdf_tree(material, models: bool = False) -> dict:
+    """The Mitsuba BSDF of a material (None: a pure emitter, black).
+
+    ``models``: where the material's kind has a model of its own for a
+    tracer-only part the material uses (:func:`tracer_only_model`), that model
+    instead of Mitsuba's equivalent.
+    """
+    if material is None:
+        return BLACK
+    model = tracer_only_model(material) if models else None
+    return model if model is not None else convert(material, "mitsuba")
+
+
+def tracer_only_model(material) -> dict | None:
+    """The harness's own Mitsuba model of the material's tracer-only part, or None.
+
+    A kind's module may define ``mitsuba_model(material)``: a BSDF written on
+    Mitsuba's API that models what Mitsuba lacks (``dielectric``: Schlick's
+    approximation, ``whitted_schlick``), so that the tracer's rendering of that
+    part is judged too, not only shown as an expected deviation.
+    """
+    fn = getattr(REGISTRY.get(type_of(material)), "mitsuba_model", None)
+    return None if fn is None else fn(material)
+
+
+def has_tracer_only_models(scene) -> bool:
+    """Whether a declared tracer-only part of ``scene`` has a harness model."""
+    return any(m.tracer_only_used() & set(scene.tracer_only) and
+               tracer_only_model(m) is not None for m in scene.used_materials())
 
 
 def register_plugins(mi) -> None:

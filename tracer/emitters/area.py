@@ -24,6 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from tracer import faults
 from tracer.backend import deferred, jit
 from tracer.emitters import base
 
@@ -84,7 +85,11 @@ class _SphereCone:
 
 
 class _Flat:
-    """A flat shape sampled uniformly by area: L cos(theta_l) A / r^2 from its front side."""
+    """A flat shape sampled uniformly by area: L cos(theta_l) A / r^2 from its front side.
+
+    The sample's distance is measured from p (the point is p + dist wi), and
+    the shadow ray is aimed at the point from its origin (:meth:`shadow_ray`).
+    """
     aim = (0.5, 0.5)
 
     def point(self, u):
@@ -97,19 +102,39 @@ class _Flat:
         wi = to_y / dist
         cos_l = -dr.dot(self.n, wi)  # front side emits: the light's normal faces p
         value = dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
-        return wi, dr.norm(y - origin), value
+        return wi, dist, value
+
+    @staticmethod
+    def shadow_ray(p, origin, wi, dist):
+        """From ``origin`` straight to the sampled point p + dist wi (Mitsuba's spawn_ray_to).
+
+        Along wi from the origin, which sits off the surface, the ray would
+        cross the light's own plane short of the point, and where that plane
+        meets the shading point's at a grazing angle, that crossing lies on the
+        light itself, which then shadows its own light (a shift of the offset
+        over the distance to the light's plane, beyond the shadow ray's
+        1e-3 margin).
+        """
+        to = dr.fma(wi, dist, p) - origin
+        length = dr.norm(to)
+        return to / length, length
 
 
 class _Parallelogram(_Flat):
     """Mitsuba's rectangle [-1, 1]^2 under to_world: a parallelogram of area 4 |u x v|."""
-    #: area of the local shape: the square [-1, 1]^2
-    local_area = 4.0
 
     def __init__(self, shape):
         c, u, v = shape.corners()
         self.center, self.u, self.v = base.vec(c), base.vec(u), base.vec(v)
         self.n = base.vec(shape.normal())
-        self.area = self.local_area * float(np.linalg.norm(np.cross(u, v)))
+        self.area = self.local_area() * float(np.linalg.norm(np.cross(u, v)))
+
+    @staticmethod
+    def local_area() -> float:
+        """Area of the local shape: the square [-1, 1]^2."""
+        if faults.on("area-pdf-rectangle"):
+            return 1.0   # the unit square taken for Mitsuba's [-1, 1]^2
+        return 4.0
 
     def point(self, u):
         return lights.sample_parallelogram(u, self.center, self.u, self.v)
@@ -117,7 +142,13 @@ class _Parallelogram(_Flat):
 
 class _Ellipse(_Parallelogram):
     """Mitsuba's unit disk under to_world: an ellipse of area pi |u x v|."""
-    local_area = math.pi
+
+    @staticmethod
+    def local_area() -> float:
+        """Area of the local shape: the unit disk."""
+        if faults.on("area-pdf-disk"):
+            return 4.0   # the disk's bounding square
+        return math.pi
 
     def point(self, u):
         return lights.sample_ellipse(u, self.center, self.u, self.v)
@@ -167,3 +198,9 @@ class Emitter(base.Emitter):
     def sample(self, p, origin, u):
         """(wi, distance, L cos / r^2 / pdf) from one light sample ``u`` per shading point."""
         return self.sampler.sample(self.radiance, p, origin, u)
+
+    def shadow_ray(self, p, origin, wi, dist):
+        """The sampler's shadow ray, if it has its own (flat shapes aim at the point)."""
+        if hasattr(self.sampler, "shadow_ray"):
+            return self.sampler.shadow_ray(p, origin, wi, dist)
+        return wi, dist

@@ -9,6 +9,7 @@ tracer needs:
   towards the light, the length of the shadow ray from its origin to the
   light, and the incident quantity that multiplies f cos (lecture 1,
   "Light attenuation"; for area lights an estimator of integral L d(omega));
+  :meth:`Emitter.shadow_ray` turns that into the shadow ray itself;
 * :meth:`Emitter.background`: for a light at infinity (``infinite``), the
   radiance a ray that escapes the scene brings back;
 * :attr:`Emitter.illuminates`: whether shading points sample it at all (a
@@ -81,6 +82,16 @@ class Emitter:
         ``u``: a 2D sample in [0, 1)^2 (Array2f), unused by delta lights.
         """
         raise NotImplementedError
+
+    def shadow_ray(self, p, origin, wi, dist) -> tuple[Any, Any]:
+        """(unit direction, length) of the shadow ray from ``origin`` for a :meth:`sample`.
+
+        By default along ``wi``, ``dist`` long: right for a light whose point no
+        surface occupies (a point light's position, a direction at infinity). A
+        light sampled at points of its own surface aims at the point instead
+        (:mod:`tracer.emitters.area`).
+        """
+        return wi, dist
 
     def background(self, d):
         """Radiance (Array3f) brought back by rays escaping along the unit ``d`` (``infinite``)."""

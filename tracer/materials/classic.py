@@ -63,6 +63,7 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
+from tracer import faults
 from tracer.backend import deferred
 from tracer.materials import base
 from tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
@@ -159,8 +160,10 @@ class BSDF(base.BSDF):
         return kd * color   # Heckbert: kd colour (kl_j colour_j (N . L_j)), no 1 / pi
 
     def delta_lobes(self, prm, si):
-        _, _, ks, kt, _, _, eta = prm
+        color, _, ks, kt, _, _, eta = prm
         t_dir, tir = fresnel.refract(si.d, si.ns, eta)
+        if faults.on("classic-reflection-tinted"):
+            ks = ks * color
         return [(fresnel.reflect(si.d, si.ns), ks), (t_dir, dr.select(tir, 0.0, kt))]
 
     def emission_terms(self, prm, si):

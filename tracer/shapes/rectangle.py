@@ -12,6 +12,8 @@ U*.U = V*.V = 1 and U*.V = V*.U = 0, so shear is handled too.
 import drjit as dr
 import numpy as np
 
+from tracer import faults
+
 
 def frame(center, u, v):
     """Precomputed (numpy, float64) plane normal m/|m| and dual vectors for one rectangle."""
@@ -32,6 +34,8 @@ def intersect(o, d, center, n, u_dual, v_dual, tmax):
     a = dr.dot(rel, u_dual)
     b = dr.dot(rel, v_dual)
     hit = (t > 0) & (t < tmax) & (dr.abs(a) <= 1) & (dr.abs(b) <= 1)
+    if faults.on("plane-hit-behind-ray"):
+        hit = (t < tmax) & (dr.abs(a) <= 1) & (dr.abs(b) <= 1)
     return t, hit, a, b
 
 

@@ -16,6 +16,8 @@ grad(|p - c|^2 - r^2) / 2 = p - c, divided by r.
 
 import drjit as dr
 
+from tracer import faults
+
 
 def roots(o, d, center, radius, unit: bool = False):
     """Both roots (t0 <= t1) of the ray-sphere quadratic and a mask of rays with real roots.
@@ -29,6 +31,8 @@ def roots(o, d, center, radius, unit: bool = False):
     c = dr.squared_norm(f) - radius * radius
     if unit:
         disc = radius * radius - dr.squared_norm(f - b * d)
+        if faults.on("sphere-half-b-discriminant"):
+            disc = b * b - 4 * c
     else:
         a = dr.squared_norm(d)
         disc = a * (radius * radius - dr.squared_norm(f - (b / a) * d))
@@ -47,6 +51,8 @@ def intersect(o, d, center, radius, tmax):
     """Nearest root in (0, tmax) and whether there is one (the hit record's t); |d| = 1."""
     t0, t1, real = roots(o, d, center, radius, unit=True)
     t = dr.select(t0 > 0, t0, t1)
+    if faults.on("sphere-near-root-from-inside"):
+        t = t0
     hit = real & (t > 0) & (t < tmax)
     return t, hit
 

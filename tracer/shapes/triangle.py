@@ -56,6 +56,8 @@ from typing import NamedTuple
 
 import drjit as dr
 
+from tracer import faults
+
 
 class RaySpace(NamedTuple):
     """The per-ray part of the test: the axis permutation and the shear of Woop et al."""
@@ -142,4 +144,6 @@ def normal(e1, e2):
 
 def interpolate(beta, gamma, a0, a1, a2):
     """A vertex attribute at barycentrics (1 - beta - gamma, beta, gamma)."""
+    if faults.on("barycentrics-swapped"):
+        beta, gamma = gamma, beta
     return a0 * (1 - beta - gamma) + a1 * beta + a2 * gamma

@@ -1,0 +1,698 @@
+"""A catalog of plausible formula bugs, and the sweep that shows the harness catches each one.
+
+A comparison that passes says little unless it would have failed on a wrong
+formula. Each :class:`Mutant` below is a bug a student could plausibly write
+into one formula of the lectures (lecture 1: "Ray tracing", TU Wien 186.101;
+lecture 2: UCSD CSE 168, "Ray-surface intersection, shading"), named by an
+id, with the formula as the bug computes it and as it should be, the slide
+topic it belongs to, and the formula function of the tracer that carries its
+switch (one ``if faults.on("id")`` there, :mod:`tracer.faults`). Nothing is
+edited: ``with faults.active("lambert-no-inv-pi"): ...`` renders the tracer
+with that bug.
+
+:func:`sweep` renders every built-in scene with the tracer as written and
+with each bug, and judges each image as ``whitted compare`` does
+(:mod:`reference.compare`): against the deterministic reference at float
+precision, against the harness's own model of a declared tracer-only part,
+and, on area-lit scenes, by the one-lobe reference's statistical verdict. A
+bug is *caught* by a scene whose verdict fails; the sweep passes when the
+tracer as written passes every scene and every bug is caught by at least
+one. Each catch records its margin: how many times its most violated check
+exceeds its limit (1 is the limit itself).
+
+Which reference can see which bug. The deterministic reference evaluates
+Mitsuba's plugins along the tracer's ray tree, at the tracer's film positions
+and area-light samples: it reads :func:`tracer.sampling.pixel_samples` and
+:func:`tracer.sampling.light_sample` itself, so a bug there is in both images
+alike and invisible to it (``shared``). Only the one-lobe reference, which
+takes its pixel positions from Mitsuba's own sampler and its light samples
+from its own stream, can see such a bug, and ``whitted compare`` runs it
+only on scenes with area lights (the second opinion): the sweep judges shared
+bugs by that verdict alone. Every other bug lives in code that only the
+tracer runs and is judged by every verdict of the scene, as ``compare`` does.
+
+Cost. Each reference is rendered once per scene and reused for every bug
+(a bug changes the tracer, never Mitsuba); a bug is rendered only on the
+scenes where its switch is reached (:func:`tracer.faults.recording` while the
+tracer as written renders the scene: a switch never asked about cannot change
+the image). What remains is dominated by compiling each bug's kernels, which
+Dr.Jit then keeps in its kernel cache on disk.
+
+Adding a bug: one :class:`Mutant` entry in :data:`CATALOG` and one ``if
+faults.on("id")`` in the formula it breaks (``docs/extending.md``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Iterable
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+from tracer import faults
+
+L1 = "lecture 1"
+L2 = "lecture 2"
+
+
+@dataclass(frozen=True)
+class Mutant:
+    """One plausible bug in one formula (see the module docstring)."""
+    id: str
+    #: what the bug does, in one sentence
+    summary: str
+    #: the formula as the bug computes it
+    wrong: str
+    #: the formula as it should be
+    correct: str
+    #: the lecture slide topic it belongs to, e.g. 'lecture 1, "Snell's law"'
+    topic: str
+    #: the tracer function whose ``faults.on(id)`` switches it, "path: function"
+    where: str
+    #: the deterministic reference reads the same code (tracer.sampling), so only the
+    #: one-lobe reference can see the bug
+    shared: bool = False
+
+    @property
+    def references(self) -> tuple[str, ...]:
+        """The references that can see this bug."""
+        return ("onelobe",) if self.shared else ("deterministic", "onelobe")
+
+
+def _m(id_, summary, wrong, correct, lecture, slide, where, shared=False) -> Mutant:
+    return Mutant(id_, summary, wrong, correct, f'{lecture}, "{slide}"', where, shared)
+
+
+#: The catalog: one entry per bug, in the order of the lectures' topics.
+CATALOG: tuple[Mutant, ...] = (
+    # --- Fresnel, Snell, total internal reflection (lecture 1) ---------------------------
+    _m("schlick-for-exact",
+       "Glass asked for the exact Fresnel equations gets Schlick's approximation.",
+       "R = R0 + (1 - R0)(1 - cos)^5",
+       "R = (r_s^2 + r_p^2) / 2, r_s = (n1 cos_i - n2 cos_t) / (n1 cos_i + n2 cos_t), "
+       "r_p = (n2 cos_i - n1 cos_t) / (n2 cos_i + n1 cos_t)",
+       L1, "The Fresnel equation", "tracer/fresnel.py: fresnel_exact"),
+    _m("fresnel-average-amplitudes",
+       "The two polarisations are averaged as amplitudes before squaring, not as "
+       "reflectances.",
+       "R = ((r_s + r_p) / 2)^2", "R = (r_s^2 + r_p^2) / 2",
+       L1, "The Fresnel equation", "tracer/fresnel.py: fresnel_exact"),
+    _m("schlick-dense-side-cosine",
+       "Schlick's approximation takes the incident angle's cosine also when the ray "
+       "leaves the denser medium.",
+       "R = R0 + (1 - R0)(1 - cos theta_i)^5 on both sides",
+       "R = R0 + (1 - R0)(1 - cos theta)^5 with theta the angle on the less dense side "
+       "(theta_t when leaving glass), R = 1 beyond the critical angle",
+       L1, "The Fresnel equation (simplified)", "tracer/fresnel.py: fresnel_schlick"),
+    _m("snell-eta-inverted",
+       "Snell's law with the ratio of the indices upside down.",
+       "sin theta_t = (n2 / n1) sin theta_i", "n1 sin theta_i = n2 sin theta_t",
+       L1, "Snell's law", "tracer/fresnel.py: refract"),
+    _m("normal-not-flipped-inside",
+       "A ray leaving a refracting surface is refracted about the outward normal, not "
+       "the normal on its own side.",
+       "t = d / rel + (cos_i / rel - cos_t) n, n always outward",
+       "t = d / rel + (cos_i / rel - cos_t) n', n' = n turned to the side the ray "
+       "comes from",
+       L1, "Refraction", "tracer/fresnel.py: refract"),
+    _m("tir-ignored",
+       "No total internal reflection: beyond the critical angle the negative root is "
+       "'fixed' with an absolute value, so light still leaves the glass.",
+       "cos theta_t = sqrt(|1 - sin^2 theta_t|), no TIR",
+       "sin^2 theta_t > 1: total internal reflection, R = 1, no refracted ray",
+       L1, "Total internal reflection", "tracer/fresnel.py: _snell"),
+    _m("reflect-sign",
+       "The mirror direction with the wrong sign of the normal term.",
+       "r = d + 2 (d . n) n", "r = d - 2 (d . n) n",
+       L1, "Reflection", "tracer/fresnel.py: reflect"),
+    _m("no-eta2-scaling",
+       "Refracted radiance is not scaled by the squared ratio of the indices.",
+       "L_t = (1 - R) L", "L_t = (1 - R) (n1 / n2)^2 L",
+       L1, "Refraction", "tracer/materials/dielectric.py: BSDF.delta_lobes"),
+    _m("inverted-eta2",
+       "Refracted radiance is scaled by the squared ratio of the indices upside down.",
+       "L_t = (1 - R) (n2 / n1)^2 L", "L_t = (1 - R) (n1 / n2)^2 L",
+       L1, "Refraction", "tracer/materials/dielectric.py: BSDF.delta_lobes"),
+    _m("no-fresnel-on-transmission",
+       "The refracted ray is not weighted by the light the reflection takes.",
+       "L_t = (n1 / n2)^2 L", "L_t = (1 - R) (n1 / n2)^2 L",
+       L1, "The Fresnel equation", "tracer/materials/dielectric.py: BSDF.delta_lobes"),
+    # --- Lambert, attenuation, lights ------------------------------------------------------
+    _m("lambert-no-cosine",
+       "Diffuse shading without Lambert's cosine.",
+       "L = f E", "L = f E cos theta, cos theta = N . L",
+       L1, "Light attenuation", "tracer/lights.py: lambert_cosine"),
+    _m("lambert-abs-cosine",
+       "Lambert's cosine taken as an absolute value: light from behind a surface lights it.",
+       "cos theta = |N . L|", "cos theta = max(N . L, 0)",
+       L2, "Diffuse term", "tracer/lights.py: lambert_cosine"),
+    _m("lambert-no-inv-pi",
+       "The Lambertian BRDF without its 1/pi, reflecting pi times the light it receives.",
+       "f = kd", "f = kd / pi (energy conservation: integral of cos over the hemisphere is pi)",
+       L1, "BRDF types (diffuse)", "tracer/materials/diffuse.py: BSDF.eval"),
+    _m("point-light-no-falloff",
+       "A point light without the inverse-square law.",
+       "E = I", "E = I / r^2",
+       L2, "Falloff, spot lights", "tracer/lights.py: inverse_square"),
+    _m("point-light-linear-falloff",
+       "A point light that falls off linearly with distance.",
+       "E = I / r", "E = I / r^2",
+       L2, "Falloff, spot lights", "tracer/lights.py: inverse_square"),
+    _m("spot-linear-falloff",
+       "The spot's ramp between beam_width and cutoff_angle is linear in cos theta, "
+       "not in the angle theta.",
+       "falloff = (cos theta - cos theta_c) / (cos theta_b - cos theta_c)",
+       "falloff = (theta_c - theta) / (theta_c - theta_b) (Mitsuba's spot profile)",
+       L2, "Falloff, spot lights", "tracer/lights.py: spot_falloff"),
+    _m("spot-smoothstep-falloff",
+       "The spot's ramp is a smoothstep of the cosine (pbrt-v4's profile), not "
+       "Mitsuba's linear ramp in the angle.",
+       "falloff = x^2 (3 - 2x), x = (cos theta - cos theta_c) / (cos theta_b - cos theta_c)",
+       "falloff = (theta_c - theta) / (theta_c - theta_b)",
+       L2, "Falloff, spot lights", "tracer/lights.py: spot_falloff"),
+    _m("directional-light-reversed",
+       "A directional light's travel direction is used as the direction towards it.",
+       "wi = d", "wi = -d (d: the direction the light travels)",
+       L2, "Point and directional lights", "tracer/lights.py: directional"),
+    _m("heckbert-light-inverse-square",
+       "Heckbert's light spheres given an inverse-square falloff his model does not have.",
+       "kl colour (N . L) / r^2", "kl colour (N . L), at any distance",
+       L1, "The illumination equation", "tracer/lights.py: sphere_centre"),
+    # --- area lights -----------------------------------------------------------------------
+    _m("area-pdf-rectangle",
+       "A rectangle light's area taken from the unit square instead of Mitsuba's "
+       "[-1, 1]^2.",
+       "A = |u x v|", "A = 4 |u x v| (half-edges u, v)",
+       L1, "Shadow computation", "tracer/emitters/area.py: _Parallelogram.local_area"),
+    _m("area-pdf-disk",
+       "A disk light's area taken as its bounding square's.",
+       "A = 4 |u x v|", "A = pi |u x v|",
+       L1, "Shadow computation", "tracer/emitters/area.py: _Ellipse.local_area"),
+    _m("area-pdf-sphere-cone",
+       "The solid angle of the cone a sphere light subtends without the 2 of the "
+       "azimuth's 2 pi.",
+       "pdf = 1 / (pi (1 - cos theta_max))", "pdf = 1 / (2 pi (1 - cos theta_max))",
+       L1, "Quick radiometry recap", "tracer/lights.py: sample_cone"),
+    _m("sphere-cone-disk-solid-angle",
+       "The cone's solid angle approximated by the projected disk's, pi sin^2 theta_max.",
+       "pdf = 1 / (pi sin^2 theta_max)", "pdf = 1 / (2 pi (1 - cos theta_max))",
+       L1, "Quick radiometry recap", "tracer/lights.py: sample_cone"),
+    _m("triangle-warp-no-sqrt",
+       "Points on a triangle light drawn without the square root of the warp: not "
+       "uniform in area, though the pdf says they are.",
+       "p = p0 + (1 - u1) e1 + u2 u1 e2", "p = p0 + (1 - sqrt(u1)) e1 + u2 sqrt(u1) e2",
+       L2, "Ray-triangle intersection", "tracer/lights.py: sample_triangle"),
+    _m("light-sample-same-uv",
+       "Both coordinates of an area light's sample come from one random number.",
+       "u = (x, x)", "u = (x, y), independent",
+       L1, "Shadow computation", "tracer/sampling.py: stratified_2d", shared=True),
+    # --- shadows ---------------------------------------------------------------------------
+    _m("shadow-acne",
+       "Shadow rays start exactly on the surface, without an offset, and may hit it.",
+       "o = p", "o = p + eps n (n on the light's side)",
+       L1, "Shadow computation", "tracer/integrator.py: Integrator._level"),
+    _m("shadow-ray-past-light",
+       "Shadow rays are not stopped at the light: anything beyond it casts a shadow.",
+       "t_max = inf", "t_max = |light - p| (1 - eps)",
+       L1, "Shadow computation", "tracer/integrator.py: Integrator._level"),
+    # --- intersections and normals ---------------------------------------------------------
+    _m("sphere-near-root-from-inside",
+       "The ray-sphere test always takes the smaller root, so a ray starting inside "
+       "misses the sphere.",
+       "t = t0", "t = t0 if t0 > 0 else t1",
+       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: intersect"),
+    _m("sphere-half-b-discriminant",
+       "The discriminant of the half-b quadratic keeps the full form's 4.",
+       "disc = b'^2 - 4 a c with b' = d . (o - c)", "disc = b'^2 - a c",
+       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: roots"),
+    _m("plane-hit-behind-ray",
+       "The ray-plane test keeps intersections behind the ray's origin.",
+       "hit = |a| <= 1 and |b| <= 1", "hit = t > 0 and |a| <= 1 and |b| <= 1",
+       L2, "Ray-polygon intersection", "tracer/shapes/rectangle.py: intersect"),
+    _m("unnormalized-normal",
+       "The sphere's normal is the gradient p - c, not divided by the radius.",
+       "n = p - c", "n = (p - c) / r",
+       L1, "Surface normals", "tracer/geometry.py: _SphereBlock.surface"),
+    _m("normal-not-renormalized",
+       "Interpolated vertex normals are used without normalising them again.",
+       "n = b0 n0 + b1 n1 + b2 n2", "n = normalize(b0 n0 + b1 n1 + b2 n2)",
+       L2, "Interpolating normals", "tracer/geometry.py: _MeshBlock.surface"),
+    _m("barycentrics-swapped",
+       "Vertex attributes (normals, texture coordinates) interpolated with the "
+       "barycentrics of the second and third vertex swapped.",
+       "a = (1 - b - g) a0 + g a1 + b a2", "a = (1 - b - g) a0 + b a1 + g a2",
+       L2, "Interpolating normals", "tracer/shapes/triangle.py: interpolate"),
+    _m("instance-normal-by-matrix",
+       "Normals of an instance are taken to world space by its matrix, not by the "
+       "inverse transpose.",
+       "n' = M n", "n' = (M^-1)^T n",
+       L2, "Instancing", "tracer/geometry.py: instance_normal_matrix"),
+    _m("backface-not-flipped",
+       "Two-sided shading forgets to turn the normal towards the side the ray comes "
+       "from, so back faces go dark.",
+       "N = n", "N = n if n . d < 0 else -n",
+       L2, "Diffuse term", "tracer/integrator.py: Integrator._level"),
+    # --- cameras ---------------------------------------------------------------------------
+    _m("fov-vertical-for-horizontal",
+       "The horizontal field of view is used as the vertical one.",
+       "d = f + (2u - 1) tan(fov/2) aspect r + (1 - 2v) tan(fov/2) up",
+       "d = f + (2u - 1) tan(fov/2) r + (1 - 2v) tan(fov/2) / aspect up",
+       L1, "Perspective camera construction", "tracer/camera.py: generate_rays"),
+    _m("camera-y-not-flipped",
+       "Image rows counted from the bottom: the picture is upside down.",
+       "y_ndc = 2v - 1", "y_ndc = 1 - 2v (row 0 at the top)",
+       L1, "Perspective camera construction", "tracer/camera.py: generate_rays"),
+    _m("ortho-width-as-half",
+       "The orthographic camera's width is taken as its half-width.",
+       "o = eye + (2u - 1) width r + ...", "o = eye + (2u - 1) width / 2 r + ...",
+       L1, "Orthographic camera", "tracer/camera.py: generate_rays"),
+    _m("pixel-sample-corner",
+       "Samples at the corners of their strata instead of their centres: the image "
+       "moves by half a stratum.",
+       "x = px + i / n", "x = px + (i + 1/2) / n",
+       L1, "Perspective camera construction", "tracer/sampling.py: pixel_samples",
+       shared=True),
+    # --- Phong, textures, the classic model ------------------------------------------------
+    _m("phong-no-normalization",
+       "The Phong lobe without its normalisation, so highlights lose energy as the "
+       "exponent grows.",
+       "f_s = ks cos^p alpha", "f_s = ks (p + 2) / (2 pi) cos^p alpha",
+       L2, "Specular highlights", "tracer/phong.py: phong_lobe"),
+    _m("blinn-phong-with-phong-normalization",
+       "The Blinn-Phong lobe normalised with Phong's factor.",
+       "f_s = ks (p + 2) / (2 pi) cos^p theta_h",
+       "f_s = ks (p + 2)(p + 4) / (8 pi (2^(-p/2) + p)) cos^p theta_h",
+       L2, "Specular highlights", "tracer/phong.py: blinn_phong_lobe"),
+    _m("half-vector-unnormalized",
+       "The half vector is not normalised.",
+       "h = wi + wo", "h = (wi + wo) / |wi + wo|",
+       L2, "Specular highlights", "tracer/phong.py: blinn_phong_lobe"),
+    _m("checkerboard-uv-swap",
+       "The checkerboard is looked up at (v, u).",
+       "(u', v') = (s_u v, s_v u)", "(u', v') = (s_u u, s_v v)",
+       L2, "The BRDF", "tracer/texture.py: checkerboard"),
+    _m("classic-reflection-tinted",
+       "In Whitted's model the reflected ray is tinted by the surface colour.",
+       "I = ... + ks colour S", "I = ... + ks S",
+       L1, "The Illumination Equation with recursion",
+       "tracer/materials/classic.py: BSDF.delta_lobes"),
+)
+
+BY_ID: dict[str, Mutant] = {m.id: m for m in CATALOG}
+faults.declare(BY_ID)
+
+
+def get(ids: Iterable[str]) -> list[Mutant]:
+    """The catalog entries of ``ids`` (in catalog order); one-line ``UserError`` if unknown."""
+    from tracer.errors import UserError
+
+    ids = list(ids)
+    unknown = [i for i in ids if i not in BY_ID]
+    if unknown:
+        raise UserError(f"unknown mutant {unknown[0]!r} (whitted mutants --list shows the "
+                        f"{len(CATALOG)} ids)")
+    wanted = set(ids)
+    return [m for m in CATALOG if m.id in wanted]
+
+
+# ------------------------------------------------------------------------------ margins
+
+
+def margin(checks: dict) -> tuple[float, str]:
+    """(how many times the most violated check exceeds its limit, that check's name).
+
+    For a check "value < limit" the margin is value / limit; for the z-test's
+    "fraction passing >= limit" it is the failing fraction over the allowed one,
+    (1 - value) / (1 - limit). Above 1 the check fails; NaN (a render that
+    produced NaN) counts as infinitely far.
+    """
+    worst, name = -math.inf, ""
+    for k, c in checks.items():
+        v, lim = c["value"], c["limit"]
+        if v is None or (isinstance(v, float) and math.isnan(v)):
+            m = math.inf
+        elif k == "z_fraction_passed":
+            m = (1 - v) / (1 - lim)
+        else:
+            m = v / lim if lim > 0 else (math.inf if v > 0 else 0.0)
+        if not c["pass"]:
+            m = max(m, 1.0)   # a failing check is at least at its limit
+        if m > worst:
+            worst, name = m, k
+    return worst, name
+
+
+# ------------------------------------------------------------------------------ the sweep
+
+#: Sweep sizes: ``quick`` for the test suite and the quick report, ``full`` the scenes'
+#: own sizes (as ``whitted compare``).
+QUICK_WIDTH = 64
+QUICK_SPP = 16
+
+
+def sweep_size(scene, quick: bool):
+    """The scene at the sweep's size: at most QUICK_WIDTH pixels wide and QUICK_SPP spp."""
+    if not quick:
+        return scene
+    w, h = scene.film.width, scene.film.height
+    if w > QUICK_WIDTH:
+        h = max(8, round(h * QUICK_WIDTH / w))
+        w = QUICK_WIDTH
+    return scene.with_overrides(size=(w, h), spp=min(scene.film.spp, QUICK_SPP))
+
+
+@dataclass
+class Unit:
+    """One verdict of a scene, as ``whitted compare`` judges it, with its reference kept."""
+    label: str          # "deterministic", "tracer-only model", "second opinion"
+    reference: str      # "deterministic" or "onelobe"
+    test: str           # "exact-strata", "tessellated" or "z-test"
+    scene: object
+    ref: object         # an image (deterministic) or a ReferenceResult (onelobe)
+    reached: frozenset = frozenset()
+    regions: dict | None = None
+    clean_margin: float = 0.0
+    clean_check: str = ""
+    clean_passed: bool = True
+
+    def judge(self, tracer_image=None) -> dict:
+        """The verdict's checks for a tracer image (the tracer renders here for z-tests)."""
+        from reference.compare import image_metrics, judge, statistical_verdict
+
+        if self.reference == "onelobe":
+            return statistical_verdict(self.scene, self.ref, tracer_image,
+                                       regions=self.regions).verdict.checks
+        metrics = image_metrics(tracer_image, self.ref, with_flip=False)
+        return judge(self.test, metrics, tracer_image, self.ref)[0].checks
+
+
+def _tracer_image(scene):
+    from tracer.integrator import Integrator
+
+    return Integrator(scene).render().image
+
+
+def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
+    """The verdicts ``whitted compare`` gives ``scene``, each with its reference rendered once.
+
+    As :func:`reference.compare.compare_scene`: the scene with declared
+    tracer-only parts replaced is judged against the deterministic reference;
+    a declared part with a harness model (Schlick) is judged as it is against
+    the deterministic reference with that model; an area-lit scene also gets
+    the one-lobe reference's statistical verdict at the second opinion's size.
+    Each unit's clean verdict, and which switches its render reached, are recorded.
+    """
+    from reference.compare import (
+        choose_test,
+        comparable,
+        regions_of,
+        second_opinion_scene,
+        ztest_passes,
+    )
+    from reference.deterministic import DeterministicReference, shares_light_samples
+    from reference.materials import has_tracer_only_models
+    from reference.render import render_reference
+    from tracer.integrator import material_ids
+
+    full = scene
+    scene = comparable(scene)
+    units = []
+    if shares_light_samples(scene):
+        units.append(Unit("deterministic", "deterministic", choose_test(scene),
+                          scene, DeterministicReference(scene).render().image))
+        if scene is not full and has_tracer_only_models(full):
+            units.append(Unit("tracer-only model", "deterministic", choose_test(full), full,
+                              DeterministicReference(full, models=True).render().image))
+        second = scene.samples_lights()
+    else:
+        second = True   # no shared light samples: the one-lobe reference judges it alone
+    if second:
+        small = second_opinion_scene(scene)
+        ref = render_reference(small, "whitted", moments=True,
+                               passes=ztest_passes(small.film.strata ** 2))
+        units.append(Unit("second opinion" if units else "onelobe", "onelobe", "z-test", small,
+                          ref, regions=regions_of(material_ids(small), list(small.materials))))
+    for u in units:
+        with faults.recording() as asked:
+            image = None if u.reference == "onelobe" else _tracer_image(u.scene)
+            checks = u.judge(image)
+        u.reached = frozenset(asked)
+        u.clean_margin, u.clean_check = margin(checks)
+        u.clean_passed = all(c["pass"] for c in checks.values())
+    return units
+
+
+@dataclass
+class Catch:
+    """A scene whose verdict fails with a bug switched on."""
+    scene: str
+    verdict: str        # the unit that failed: "deterministic", "second opinion", ...
+    margin: float       # how many times the most violated check exceeds its limit
+    check: str
+
+
+@dataclass
+class MutantResult:
+    id: str
+    summary: str
+    topic: str
+    references: list[str]
+    caught_by: list[Catch] = field(default_factory=list)
+    #: scenes whose render reaches the switch but whose verdict passes
+    passed: list[str] = field(default_factory=list)
+    #: scenes where the switch is reached only by verdicts blind to it (shared code)
+    blind: list[str] = field(default_factory=list)
+    errors: list[str] = field(default_factory=list)
+    seconds: float = 0.0
+
+    @property
+    def caught(self) -> bool:
+        return bool(self.caught_by)
+
+    @property
+    def strongest(self) -> Catch | None:
+        return max(self.caught_by, key=lambda c: c.margin, default=None)
+
+    @property
+    def weakest(self) -> Catch | None:
+        return min(self.caught_by, key=lambda c: c.margin, default=None)
+
+
+@dataclass
+class SceneResult:
+    name: str
+    size: tuple[int, int]
+    spp: int
+    verdicts: list[dict]        # label, reference, test, clean pass, clean margin
+    passed: bool
+    seconds: float = 0.0
+
+
+@dataclass
+class SweepResult:
+    quick: bool
+    scenes: list[SceneResult]
+    mutants: list[MutantResult]
+    seconds: float = 0.0
+
+    @property
+    def clean_passed(self) -> bool:
+        return all(s.passed for s in self.scenes)
+
+    @property
+    def all_caught(self) -> bool:
+        return all(m.caught for m in self.mutants)
+
+    @property
+    def passed(self) -> bool:
+        return self.clean_passed and self.all_caught
+
+    def to_json(self) -> dict:
+        out = {"pass": self.passed, "quick": self.quick, "seconds": self.seconds,
+               "clean_passed": self.clean_passed, "all_caught": self.all_caught,
+               "scenes": [asdict(s) for s in self.scenes], "mutants": []}
+        for m in self.mutants:
+            d = asdict(m)
+            d["caught"] = m.caught
+            d["strongest"] = None if m.strongest is None else asdict(m.strongest)
+            d["weakest"] = None if m.weakest is None else asdict(m.weakest)
+            d["shared"] = BY_ID[m.id].shared if m.id in BY_ID else False
+            out["mutants"].append(d)
+        return out
+
+
+def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: bool = True,
+          log: Callable[[str], None] = print) -> SweepResult:
+    """Judge the tracer as written and with each bug on every scene (module docstring)."""
+    from tracer import load_scene
+
+    start = time.perf_counter()
+    mutants = list(CATALOG if mutants is None else mutants)
+    results = {m.id: MutantResult(m.id, m.summary, m.topic, list(m.references))
+               for m in mutants}
+    scenes_out = []
+    scenes = [sweep_size(load_scene(p), quick) for p in scene_paths]  # validated first
+    for i, scene in enumerate(scenes, 1):
+        t0 = time.perf_counter()
+        units = scene_units(scene)
+        clean = all(u.clean_passed for u in units)
+        reached = frozenset().union(*(u.reached for u in units))
+        todo = [m for m in mutants if m.id in reached]
+        for m in todo:
+            r = results[m.id]
+            t1 = time.perf_counter()
+            outcome = _judge_mutant(m, units)
+            r.seconds += time.perf_counter() - t1
+            if isinstance(outcome, Catch):
+                outcome.scene = scene.name
+                r.caught_by.append(outcome)
+            elif outcome == "blind":
+                r.blind.append(scene.name)
+            elif outcome.startswith("error"):
+                r.errors.append(f"{scene.name}: {outcome}")
+            else:
+                r.passed.append(scene.name)
+        seconds = time.perf_counter() - t0
+        scenes_out.append(SceneResult(
+            scene.name, (scene.film.width, scene.film.height), scene.film.strata ** 2,
+            [{"verdict": u.label, "reference": u.reference, "test": u.test,
+              "pass": u.clean_passed, "margin": u.clean_margin, "check": u.clean_check}
+             for u in units], clean, seconds))
+        log(f"[{i}/{len(scenes)}] {scene.name:<22} tracer as written: "
+            f"{'pass' if clean else 'FAIL'} (margin {max(u.clean_margin for u in units):.2f}); "
+            f"{len(todo)} mutants reach it, "
+            f"{sum(1 for m in todo if any(c.scene == scene.name for c in results[m.id].caught_by))}"
+            f" caught ({seconds:.1f} s)")
+    return SweepResult(quick, scenes_out, list(results.values()),
+                       time.perf_counter() - start)
+
+
+def _judge_mutant(m: Mutant, units: list[Unit]):
+    """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not."""
+    seen_by_any = False
+    for u in units:
+        if m.id not in u.reached:
+            continue          # this verdict's render never asks for the switch
+        if m.shared and u.reference == "deterministic":
+            continue          # the reference reads the same code: blind by construction
+        seen_by_any = True
+        try:
+            with faults.active(m.id):
+                image = None if u.reference == "onelobe" else _tracer_image(u.scene)
+                checks = u.judge(image)
+        except Exception as e:  # a bug that crashes the tracer is not a catch of the harness
+            return f"error: {type(e).__name__}: {e}"
+        if not all(c["pass"] for c in checks.values()):
+            value, check = margin(checks)
+            return Catch("", u.label, value, check)
+    return "passed" if seen_by_any else "blind"
+
+
+# ------------------------------------------------------------------------------ output
+
+
+def format_margin(x: float) -> str:
+    if math.isinf(x):
+        return "inf (NaN)"
+    return f"{x:.3g}"
+
+
+def format_table(result: SweepResult) -> str:
+    """The sweep as text: the tracer as written per scene, then one row per bug."""
+    lines = [f"tracer as written: {sum(s.passed for s in result.scenes)}/{len(result.scenes)} "
+             "scenes pass"]
+    for s in result.scenes:
+        if not s.passed:
+            bad = [v for v in s.verdicts if not v["pass"]]
+            lines.append(f"  FAIL {s.name}: " + ", ".join(
+                f"{v['verdict']} {v['check']} x{format_margin(v['margin'])}" for v in bad))
+    width = max((len(m.id) for m in result.mutants), default=10)
+    lines.append("")
+    lines.append(f"{'mutant':<{width}}  {'reference':<13} {'caught':>6}  "
+                 f"{'strongest (margin)':<34} scenes whose verdict fails (margin)")
+    for m in result.mutants:
+        ref = "onelobe only" if m.references == ["onelobe"] else "both"
+        best = m.strongest
+        strongest = (f"{best.scene} ({format_margin(best.margin)}, {best.check})"
+                     if best else "NOT CAUGHT")
+        scenes = ", ".join(f"{c.scene} {format_margin(c.margin)}"
+                           for c in sorted(m.caught_by, key=lambda c: -c.margin))
+        lines.append(f"{m.id:<{width}}  {ref:<13} {len(m.caught_by):>6}  {strongest:<34} "
+                     f"{scenes}")
+        if m.errors:
+            lines.append(f"{'':<{width}}  errors: {'; '.join(m.errors)}")
+    missed = [m.id for m in result.mutants if not m.caught]
+    barely = [m.id for m in result.mutants if m.caught and m.strongest.margin < 2]
+    lines.append("")
+    lines.append(f"{sum(m.caught for m in result.mutants)}/{len(result.mutants)} mutants "
+                 f"caught" + (f"; NOT CAUGHT: {', '.join(missed)}" if missed else "")
+                 + (f"; caught by less than twice a limit: {', '.join(barely)}"
+                    if barely else ""))
+    lines.append(("PASS" if result.passed else "FAIL") +
+                 f" ({'quick' if result.quick else 'full'} sizes, {result.seconds:.0f} s)")
+    return "\n".join(lines)
+
+
+def catalog_table() -> str:
+    """The catalog as text (``whitted mutants --list``)."""
+    lines = []
+    for m in CATALOG:
+        lines.append(f"{m.id}  [{m.topic}; {m.where}"
+                     f"{'; shared with the deterministic reference' if m.shared else ''}]")
+        lines.append(f"    {m.summary}")
+        lines.append(f"    wrong:   {m.wrong}")
+        lines.append(f"    correct: {m.correct}")
+    return "\n".join(lines)
+
+
+def matrix(result: SweepResult) -> tuple[list[str], list[list[str]]]:
+    """(scene names, rows): per bug and scene the margin of a catch, '.' where the verdict
+    passes although the switch is reached, 'b' where only blind verdicts reach it, '' where
+    the scene never reaches it."""
+    names = [s.name for s in result.scenes]
+    rows = []
+    for m in result.mutants:
+        by = {c.scene: c for c in m.caught_by}
+        row = []
+        for n in names:
+            if n in by:
+                row.append(format_margin(by[n].margin))
+            elif n in m.passed:
+                row.append(".")
+            elif n in m.blind:
+                row.append("b")
+            else:
+                row.append("")
+        rows.append(row)
+    return names, rows
+
+
+def markdown(result: SweepResult) -> str:
+    """The sweep as Markdown: the tracer as written per scene, then one row per bug."""
+    lines = [f"# whitted mutants: {'PASS' if result.passed else 'FAIL'}", "",
+             f"{len(result.mutants)} formula bugs (`reference/mutants.py`) against "
+             f"{len(result.scenes)} scenes at {'quick' if result.quick else 'full'} sizes, "
+             f"{result.seconds:.0f} s. Margin: how many times the most violated check of a "
+             "failing verdict exceeds its limit.", "",
+             "| scene | size, spp | verdicts of the tracer as written (largest check / limit) "
+             "| result |", "|---|---|---|---|"]
+    for s in result.scenes:
+        v = "; ".join(f"{x['verdict']} ({x['test']}) {x['margin']:.2f} {x['check']}"
+                      for x in s.verdicts)
+        lines.append(f"| {s.name} | {s.size[0]}x{s.size[1]}, {s.spp} | {v} | "
+                     f"{'pass' if s.passed else '**FAIL**'} |")
+    lines += ["", "| mutant | lecture topic | seen by | caught by | strongest (margin) | "
+              "weakest (margin) | scenes whose verdict fails (margin) |",
+              "|---|---|---|---|---|---|---|"]
+    for m in result.mutants:
+        best, worst = m.strongest, m.weakest
+        scenes = ", ".join(f"{c.scene} {format_margin(c.margin)}"
+                           for c in sorted(m.caught_by, key=lambda c: -c.margin))
+        lines.append(
+            f"| `{m.id}` | {m.topic} | {', '.join(m.references)} | {len(m.caught_by)} | "
+            + (f"{best.scene} ({format_margin(best.margin)}, {best.check}) | "
+               f"{worst.scene} ({format_margin(worst.margin)}, {worst.check})"
+               if best else "**NOT CAUGHT** | ") + f" | {scenes} |")
+    lines.append("")
+    return "\n".join(lines)
