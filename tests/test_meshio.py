@@ -1,5 +1,9 @@
 """OBJ and PLY files read as Mitsuba reads them; vertex normals computed as Mitsuba does."""
 
+import contextlib
+import io
+import math
+import os
 import struct
 from pathlib import Path
 
@@ -217,10 +221,13 @@ def test_ply_unknown_properties_and_elements_are_skipped(tmp_path, fmt):
     frows = [(7, f[0], 0.5, [1.5] * i) for i, f in enumerate(FACES)]
     other = ("material", [("ids", "list", "int", "uchar"), ("shine", "float")],
              [([1, 2], 0.5), ([], 1.0), ([3], 2.0)])
+    # Two elements of one name are refused by plyfile (their data could not be told
+    # apart by name), so the element after the faces has a name of its own.
+    after = ("material_2", *other[1:])
     path = write_ply(tmp_path / "a.ply", fmt, [other, ("vertex", vprops, vrows),
                                                ("edge", [("a", "int"), ("b", "int")],
                                                 [(0, 1), (1, 2)]),
-                                               ("face", fprops, frows), other])
+                                               ("face", fprops, frows), after])
     m = load_mesh(path)
     np.testing.assert_array_equal(m.vertices, VERTS)
     np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3], [0, 1, 4]])
@@ -426,3 +433,258 @@ def test_vertex_normals_equal_mitsubas_for_a_ply_mesh(tmp_path, mi):
     faces = np.array(params["faces"]).reshape(-1, 3)
     np.testing.assert_allclose(per_corner(ours, m.faces), per_corner(theirs, faces),
                                atol=F32_TOL)
+
+
+# --------------------------------------------------------------------------- both formats alike
+# The tracer and Mitsuba store meshes in float32: a value float32 cannot hold, a normal it
+# cannot normalise, an index that is not an integer, or a number Python reads but Mitsuba
+# does not, is refused in one line whichever format it comes in.
+
+NXYZ = XYZ + [("nx", "float"), ("ny", "float"), ("nz", "float")]
+
+
+def ply_with_vertex_values(tmp_path, fmt, props, first_row_values, name="a.ply"):
+    """VERTS with extra properties ``props``: 0, 0, 1 on every vertex except the first."""
+    rows = [v + (tuple(first_row_values) if i == 0 else (0.0, 0.0, 1.0)[:len(props)])
+            for i, v in enumerate(VERTS)]
+    return write_ply(tmp_path / name, fmt, [("vertex", XYZ + props, rows),
+                                            ("face", FACE_PROP, FACES)])
+
+
+#: Normals float32 cannot normalise: NaN, infinite, zero, a square that underflows to 0
+#: (Mitsuba's obj plugin refuses these), a square that overflows (it makes them zero).
+BAD_NORMALS = {"nan": (math.nan, 0, 1), "inf": (0, math.inf, 0), "zero": (0, 0, 0),
+               "underflow": (1e-30, 0, 0), "overflow": (0, 1e30, 0)}
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+@pytest.mark.parametrize("name", list(BAD_NORMALS))
+def test_ply_normals_float32_cannot_normalise_are_refused(tmp_path, fmt, name):
+    normal = [("nx", "double"), ("ny", "double"), ("nz", "double")]
+    path = ply_with_vertex_values(tmp_path, fmt, normal, BAD_NORMALS[name])
+    msg = check_error(path, "PLY vertex 0", "normal")
+    if fmt == "ascii":
+        assert ":14:" in msg  # 13 header lines, then the first vertex
+
+
+@pytest.mark.parametrize("name", list(BAD_NORMALS))
+def test_obj_normals_float32_cannot_normalise_are_refused(tmp_path, name):
+    x, y, z = BAD_NORMALS[name]
+    path = write(tmp_path, "a.obj", SQUARE + f"vn {x!r} {y!r} {z!r}\nvn 0 0 1\n"
+                                             "f 1//1 2//2 3//2\n")
+    check_error(path, ":5:")  # the vn line
+
+
+def test_an_unused_zero_normal_is_not_refused(tmp_path):
+    # Mitsuba's vertex table holds only the corners the faces use; so does ours.
+    m = load_mesh(write(tmp_path, "a.obj", SQUARE + "vn 0 0 0\nvn 0 0 1\nf 1//2 2//2 3//2\n"))
+    np.testing.assert_array_equal(m.normals, np.tile([0.0, 0, 1], (3, 1)))
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_big_endian"])
+@pytest.mark.parametrize("value", [math.nan, math.inf, 1e39])
+def test_ply_uvs_and_positions_float32_cannot_hold_are_refused(tmp_path, fmt, value):
+    uv = [("u", "double"), ("v", "double")]
+    check_error(ply_with_vertex_values(tmp_path, fmt, uv, (0.5, value)), "PLY vertex 0",
+                "texture coordinate")
+    rows = [(value, 0.0, 0.0)] + VERTS[1:]
+    path = write_ply(tmp_path / "p.ply", fmt, [("vertex", [("x", "double"), ("y", "double"),
+                                                           ("z", "double")], rows),
+                                               ("face", FACE_PROP, FACES)])
+    check_error(path, "PLY vertex 0", "position")
+
+
+@pytest.mark.parametrize("line,words", [("v 1e39 0 0", ("position", "float32")),
+                                        ("vt 0.5 -1e39", ("texture coordinate", "float32"))])
+def test_obj_used_values_float32_cannot_hold_are_refused(tmp_path, line, words):
+    text = SQUARE + "vt 0 0\n" + line + "\n" + "f 1/1 2/1 -1/-1\n"
+    check_error(write(tmp_path, "a.obj", text), ":6:", *words)
+
+
+def test_ply_non_integer_face_indices_are_refused_not_truncated(tmp_path):
+    good = [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES)]
+    text = write_ply(tmp_path / "a.ply", "ascii", good).read_text()
+    (tmp_path / "b.ply").write_text(text.replace("3 0 2 3\n", "3 0 2.5 3\n"))
+    check_error(tmp_path / "b.ply", ":17:", "expected an integer", "'2.5'")  # face 1
+    # A float-typed index list: integral values name vertices, others are refused.
+    prop = [("vertex_indices", "list", "uchar", "float")]
+    for fmt in ("ascii", "binary_little_endian"):
+        ok = write_ply(tmp_path / "c.ply", fmt, [("vertex", XYZ, VERTS), ("face", prop, FACES)])
+        np.testing.assert_array_equal(load_mesh(ok).faces, [[0, 1, 2], [0, 2, 3], [0, 1, 4]])
+        bad = write_ply(tmp_path / "d.ply", fmt, [("vertex", XYZ, VERTS),
+                                                  ("face", prop, [([0, 1.5, 2],)] + FACES)])
+        check_error(bad, "face 0", "non-integer vertex index 1.5")
+
+
+@pytest.mark.parametrize("count", [b"\xb2", "\u00b2".encode(), "\u0665".encode(), b"5_0",
+                                   b"-5", b"+5", b"1000000000000"])
+def test_ply_header_element_counts_must_be_plain_decimals_the_file_can_hold(tmp_path, count):
+    # A superscript two (the byte 0xb2 in Latin-1) passes str.isdigit() but not int(); an
+    # Arabic-Indic five passes both; Python's int() also reads '5_0' and '+5'.
+    for fmt in ("ascii", "binary_little_endian"):
+        p = write_ply(tmp_path / "a.ply", fmt, [("vertex", XYZ, VERTS),
+                                                ("face", FACE_PROP, FACES)])
+        p.write_bytes(p.read_bytes().replace(b"element vertex 5", b"element vertex " + count))
+        check_error(p, ":4:")
+
+
+@pytest.mark.parametrize("number", ["\u0663", "1_0", "\uff11"])
+def test_numbers_must_be_plain_ascii_decimals_in_both_formats(tmp_path, number):
+    # Python's float() reads each of these (3, 10, a full-width 1); Mitsuba does not.
+    check_error(write(tmp_path, "a.obj", SQUARE + f"v {number} 0 0\nf 1 2 5\n"), ":5:",
+                "malformed 'v' line")
+    check_error(write(tmp_path, "b.obj", SQUARE + f"f 1 2 {number}\n"), ":5:")
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                ("face", FACE_PROP, FACES)])
+    p.write_text(p.read_text().replace("0.5 0.5 1.0", f"0.5 {number} 1.0"), encoding="utf-8")
+    check_error(p, ":15:")  # the 5th vertex
+
+
+def test_ply_ascii_values_take_their_declared_type(tmp_path):
+    # 'property float x' holds a float32, as in a binary file and in Mitsuba.
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, [(0.1, 0.2, 0.3)] + VERTS[1:]),
+                                                ("face", FACE_PROP, FACES)])
+    np.testing.assert_array_equal(load_mesh(p).vertices[0], np.float32([0.1, 0.2, 0.3]))
+
+
+def test_ply_ascii_data_after_the_last_element_is_refused_with_its_line(tmp_path):
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                ("face", FACE_PROP, FACES)])
+    p.write_text(p.read_text() + "\n7 8 9\n")
+    check_error(p, ":20:", "after its last element")
+
+
+def test_ply_two_elements_of_one_name_are_refused(tmp_path):
+    p = write_ply(tmp_path / "a.ply", "binary_little_endian",
+                  [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES), ("face", FACE_PROP, [])])
+    check_error(p, "same name")
+
+
+def test_mesh_files_that_are_not_regular_files_are_refused(tmp_path):
+    fifo = tmp_path / "pipe.ply"
+    os.mkfifo(fifo)
+    check_error(fifo, "FIFO")
+    check_error(Path("/dev/zero"), "device")
+    (tmp_path / "dir.obj").mkdir()
+    check_error(tmp_path / "dir.obj", "folder")
+
+
+def test_a_mesh_file_beyond_the_memory_limit_is_refused_before_reading(tmp_path, monkeypatch):
+    path = write_ply(tmp_path / "a.ply", "binary_little_endian",
+                     [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES)])
+    monkeypatch.setenv("WHITTED_MAX_MEMORY", "1K")
+    check_error(path, "WHITTED_MAX_MEMORY")
+
+
+def test_bad_mesh_files_are_one_line_exit_2_through_the_command_line(tmp_path):
+    from reference.cli import main
+
+    cases = {
+        "header.ply": ("\u00b2", None),
+        "normal.ply": None,
+        "index.ply": None,
+        "normal.obj": SQUARE + "vn 0 0 0\nf 1//1 2//1 3//1\n",
+    }
+    p = write_ply(tmp_path / "header.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                     ("face", FACE_PROP, FACES)])
+    p.write_bytes(p.read_bytes().replace(b"vertex 5", "vertex \u00b2".encode()))
+    ply_with_vertex_values(tmp_path, "binary_little_endian", NXYZ[3:], (math.nan, 0, 1),
+                           "normal.ply")
+    idx = write_ply(tmp_path / "index.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                      ("face", FACE_PROP, FACES)])
+    idx.write_text(idx.read_text().replace("3 0 1 2\n", "3 0 1.7 2\n"))
+    write(tmp_path, "normal.obj", cases["normal.obj"])
+    for name in cases:
+        scene = write(tmp_path, "s.toml", MESH_SCENE.format(file=tmp_path / name))
+        out = tmp_path / "out.exr"
+        err = io.StringIO()
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            rc = main(["render", str(scene), "-o", str(out)])
+        lines = err.getvalue().strip("\n").split("\n")
+        assert rc == 2 and len(lines) == 1 and name in lines[0], (name, err.getvalue())
+        assert not out.exists()
+
+
+MESH_SCENE = """
+[film]
+width = 8
+height = 6
+[camera]
+origin = [0, 0, 5]
+target = [0, 0, 0]
+fov = 40
+[materials.white]
+type = "diffuse"
+reflectance = 0.5
+[[lights]]
+type = "point"
+position = [0, 0, 5]
+intensity = 10
+[[shapes]]
+type = "mesh"
+file = "{file}"
+material = "white"
+"""
+
+
+# --------------------------------------------------------------------------- the cache
+
+
+@pytest.fixture
+def parses(monkeypatch):
+    """Counts the files :func:`load_mesh` parses (cache misses), on an empty cache."""
+    from tracer import meshio
+
+    meshio.clear_cache()
+    calls = []
+    real = meshio._read_mesh
+
+    def counting(path, *a, **k):
+        calls.append(Path(path).name)
+        return real(path, *a, **k)
+
+    monkeypatch.setattr(meshio, "_read_mesh", counting)
+    yield calls
+    meshio.clear_cache()
+
+
+def test_loading_an_unchanged_file_again_reuses_the_parsed_mesh(tmp_path, parses):
+    path = write(tmp_path, "a.obj", SQUARE + "f 1 2 3\n")
+    first = load_mesh(path)
+    again = load_mesh(tmp_path / "." / "a.obj")  # another spelling of the same file
+    assert parses == ["a.obj"] and again is first
+    with pytest.raises(ValueError):
+        first.vertices[0, 0] = 7.0  # shared, so read-only
+    # Another reading of the texture coordinates is another mesh.
+    load_mesh(path, flip_tex_coords=False)
+    assert parses == ["a.obj", "a.obj"]
+    # A changed file (size, modification time) is parsed again.
+    path.write_text(SQUARE + "f 1 2 3\nf 1 3 4\n")
+    assert len(load_mesh(path).faces) == 2
+    assert parses == ["a.obj"] * 3
+
+
+def test_loading_a_scene_twice_parses_its_mesh_once(tmp_path, parses):
+    from tracer.scene import load_scene
+
+    path = write_ply(tmp_path / "m.ply", "binary_little_endian",
+                     [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES)])
+    scene = write(tmp_path, "s.toml", MESH_SCENE.format(file=path))
+    a, b = load_scene(scene), load_scene(scene)
+    assert parses == ["m.ply"]
+    np.testing.assert_array_equal(a.shapes[0].vertices, b.shapes[0].vertices)
+
+
+def test_the_cache_is_bounded_least_recently_used_first_out(tmp_path, parses, monkeypatch):
+    from tracer import meshio
+
+    monkeypatch.setattr(meshio, "CACHE_MAX_MESHES", 2)
+    files = [write(tmp_path, f"{k}.obj", SQUARE + "f 1 2 3\n") for k in "abc"]
+    for f in files + files[2:] + files[:1]:   # a b c | c (hit) | a (evicted: parsed again)
+        load_mesh(f)
+    assert parses == ["a.obj", "b.obj", "c.obj", "a.obj"]
+    monkeypatch.setattr(meshio, "CACHE_MAX_BYTES", 10)  # no mesh fits: nothing is kept
+    meshio.clear_cache()
+    load_mesh(files[1])
+    load_mesh(files[1])
+    assert parses[-2:] == ["b.obj", "b.obj"]

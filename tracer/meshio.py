@@ -1,16 +1,28 @@
 """Triangle meshes from Wavefront OBJ and Stanford PLY files, and their vertex normals.
 
-Both readers are written here (no third-party mesh library) and follow what
-Mitsuba 3.9.1's ``obj`` and ``ply`` plugins make of the same file, so that a
-mesh means the same surface to the tracer and to the reference:
+A mesh means the same surface to the tracer and to the reference: what this
+module makes of a file is what Mitsuba 3.9.1's ``obj`` and ``ply`` plugins
+make of it (the tests compare the two):
 
-* OBJ indexes positions, texture coordinates and normals separately. A vertex
-  of the result is one distinct (position, uv, normal) index triple, numbered
-  in order of first use, which is how Mitsuba's ``obj`` plugin builds its
-  vertex table (a hash map from the triple to a new vertex id). A position
-  used with two different normals therefore becomes two vertices, and the
-  vertex normals computed later for a mesh without normals agree with
-  Mitsuba's, which are computed over the same vertex table.
+* PLY files are parsed by `plyfile <https://github.com/dranjan/python-plyfile>`_
+  (ascii, binary little and big endian, every PLY scalar type, lists of any
+  integer length type; its header grammar and its errors with line, element,
+  record and property); this module only maps its elements to a mesh. A
+  triangle mesh (every face a 3-list, the only kind Mitsuba's ``ply`` plugin
+  reads) is read in one piece through a memory map; polygon faces, which only
+  the tracer reads, through plyfile's record-by-record path.
+* OBJ files are parsed here: the OBJ readers on PyPI that were measured
+  (tinyobjloader, trimesh, pywavefront, openmesh, meshio, libigl) each differ
+  from Mitsuba's reading or refuse less than it does (negative indices taken
+  from the end of the file, quads split another way, bad numbers read as 0,
+  no line numbers, NumPy 2 arrays of zeros); the README says which and why.
+  OBJ indexes positions,
+  texture coordinates and normals separately; a vertex of the result is one
+  distinct (position, uv, normal) index triple, numbered in order of first
+  use, which is how Mitsuba's ``obj`` plugin builds its vertex table (a hash
+  map from the triple to a new vertex id). A position used with two different
+  normals therefore becomes two vertices, and the vertex normals computed
+  later for a mesh without normals agree with Mitsuba's.
 * Polygons are split into a triangle fan (v0, v_k, v_k+1), the order
   Mitsuba's ``obj`` plugin uses.
 * Texture coordinates: Mitsuba flips v (v -> 1 - v) for OBJ files by default
@@ -21,20 +33,37 @@ mesh means the same surface to the tracer and to the reference:
   face normals (:func:`compute_vertex_normals`), Mitsuba's
   ``Mesh::recompute_vertex_normals``.
 
-Every problem with a file is a :class:`MeshError` whose one-line message names
-the file and, for a bad line of an OBJ file, its line number.
+Both formats are held to one rule, in the precision the tracer and Mitsuba
+store meshes in (float32): every position, normal and texture coordinate of
+the mesh's vertex table is finite in float32; every normal has a length that
+float32 can normalise (its squared length, in float32, neither 0 nor
+infinite: Mitsuba's ``obj`` plugin refuses such a normal, its ``ply`` plugin
+makes NaN of it); face indices are integers that name a vertex of the file;
+numbers are plain ASCII decimals (Python would read ``1_0`` or an
+Arabic-Indic digit as a number, Mitsuba would not). Every problem with a file
+is a :class:`MeshError` whose one-line message names the file and, where the
+format has lines (OBJ, the PLY header, ascii PLY bodies), the line.
+
+Parsed meshes are kept in a small cache (:data:`CACHE_MAX_MESHES` meshes,
+:data:`CACHE_MAX_BYTES` bytes of arrays, least recently used first out),
+keyed by the file's resolved path, device, inode, size and modification and
+change times (nanoseconds): loading the same, unchanged file again returns the
+same :class:`MeshData`, whose arrays are read-only.
 
 References: the OBJ format is Wavefront's "Object Files (.obj)" appendix of
 the Advanced Visualizer manual; the PLY format is Greg Turk's "The PLY Polygon
-File Format" (1994), with the type names of rply/Mitsuba (int8, uint8, ...,
-float32, float64) accepted besides char, uchar, short, ushort, int, uint,
-float and double.
+File Format" (1994).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import re
+import stat
 import sys
+import warnings
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +71,22 @@ import numpy as np
 
 from tracer.errors import UserError
 
-__all__ = ["MeshData", "MeshError", "compute_vertex_normals", "face_normals", "load_mesh"]
+__all__ = ["CACHE_MAX_BYTES", "CACHE_MAX_MESHES", "MeshData", "MeshError", "clear_cache",
+           "compute_vertex_normals", "face_normals", "load_mesh"]
+
+#: The largest finite float32: positions, normals and uvs beyond it are infinite to the tracer.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+#: Bytes of memory reading a mesh may take per byte of its file, as upper bounds for the
+#: WHITTED_MAX_MEMORY check made before reading: text (OBJ, ascii PLY) and binary PLY.
+#: Peaks measured with tracemalloc on 2.4-5 MB files: OBJ of v and f lines 23x its size,
+#: of v/vt/vn lines 15x, ascii PLY 14x; binary PLY of triangles 3.3x, of mixed polygons
+#: (read record by record) 16x. The bounds leave a margin of about 1.4 over the largest.
+MEMORY_PER_FILE_BYTE = {"text": 32, "binary": 24}
+
+#: The cache's bounds: at most this many meshes, and this many bytes of arrays in all.
+CACHE_MAX_MESHES = 16
+CACHE_MAX_BYTES = 512 << 20
 
 
 class MeshError(UserError):
@@ -58,6 +102,9 @@ class MeshError(UserError):
 class MeshData:
     """A triangle mesh as read from a file (object space, Mitsuba's vertex order).
 
+    The arrays of a mesh returned by :func:`load_mesh` are read-only: the same
+    object is handed to every caller that loads the same file.
+
     Attributes
     ----------
     vertices : (V, 3) float64 positions.
@@ -70,9 +117,30 @@ class MeshData:
     normals: np.ndarray | None = None
     uvs: np.ndarray | None = None
 
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.vertices, self.faces, self.normals, self.uvs)
+                   if a is not None)
+
+
+# ---------------------------------------------------------------------------
+# Loading, and the cache of parsed meshes
+# ---------------------------------------------------------------------------
+
+_cache: OrderedDict[tuple, MeshData] = OrderedDict()
+
+
+def clear_cache() -> None:
+    """Forget every parsed mesh (the next :func:`load_mesh` of each file parses it again)."""
+    _cache.clear()
+
 
 def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshData:
     """Read an OBJ or PLY file (chosen by its contents, then by its suffix).
+
+    A file loaded before and unchanged since (same resolved path, device,
+    inode, size, modification and change time) is not parsed again: the
+    cached :class:`MeshData` is returned.
 
     Parameters
     ----------
@@ -83,28 +151,127 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
     Raises
     ------
     MeshError
-        When the file is missing, of an unknown format, malformed, refers to a
-        vertex it does not have, or has no faces.
+        When the file is missing or not a regular file, too large for the
+        memory limit, of an unknown format, malformed, refers to a vertex it
+        does not have, holds values float32 cannot represent, or has no faces.
     """
     path = Path(path)
+    st = _stat_regular(path)
+    key = (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+           st.st_ctime_ns, flip_tex_coords)
+    mesh = _cache.get(key)
+    if mesh is not None:
+        _cache.move_to_end(key)
+        return mesh
+    mesh = _read_mesh(path, st.st_size, flip_tex_coords)
+    _remember(key, mesh)
+    return mesh
+
+
+def _remember(key: tuple, mesh: MeshData) -> None:
+    """Cache ``mesh`` (arrays made read-only), dropping older versions of the file and the
+    least recently used meshes beyond the bounds."""
+    for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
+        if a is not None:
+            a.flags.writeable = False
+    for old in [k for k in _cache if k[0] == key[0]]:
+        del _cache[old]  # an older version of the same file
+    if mesh.nbytes > CACHE_MAX_BYTES:
+        return
+    _cache[key] = mesh
+    while len(_cache) > CACHE_MAX_MESHES or sum(m.nbytes for m in _cache.values()) \
+            > CACHE_MAX_BYTES:
+        _cache.popitem(last=False)
+
+
+def _stat_regular(path: Path) -> os.stat_result:
     try:
-        data = path.read_bytes()
+        st = os.stat(path)
     except FileNotFoundError:
         raise MeshError(path, "no such mesh file") from None
+    except (OSError, ValueError) as e:  # too long, a loop of links, a NUL in the name, ...
+        raise MeshError(path, f"cannot read the mesh file ({getattr(e, 'strerror', None) or e})"
+                        ) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise MeshError(path, "is a folder, expected a mesh file")
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "a device")
+        raise MeshError(path, f"is {kind}, expected a regular file (an OBJ or PLY mesh)")
+    return st
+
+
+def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None) -> MeshData:
+    """Parse the file (no cache): the format by its first bytes, then by its suffix."""
+    from tracer.limits import check_memory
+
+    def check(kind: str) -> None:
+        try:
+            check_memory(size * MEMORY_PER_FILE_BYTE[kind],
+                         f"reading this {size:,}-byte mesh file")
+        except UserError as e:
+            raise MeshError(path, str(e)) from None
+
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+            if magic[:3] == b"ply" and magic[3:4] in (b"\n", b"\r", b" ", b"\t"):
+                check("binary")  # ascii PLY files are checked again once their header is read
+                mesh = _read_ply(path, fh, size, bool(flip_tex_coords), check)
+            elif path.suffix.lower() == ".obj":
+                check("text")
+                data = magic + fh.read()
+                mesh = _read_obj(path, data, True if flip_tex_coords is None
+                                 else flip_tex_coords)
+            elif path.suffix.lower() == ".ply":
+                raise MeshError(path, "not a PLY file (it does not start with 'ply')")
+            else:
+                raise MeshError(path, f"unknown mesh format {path.suffix!r} "
+                                      "(expected .obj or .ply)")
     except OSError as e:
         raise MeshError(path, f"cannot read the mesh file ({e.strerror or e})") from None
-    if data.startswith(b"ply") and data[3:4] in (b"\n", b"\r", b" ", b"\t"):
-        mesh = _read_ply(path, data, bool(flip_tex_coords))
-    elif path.suffix.lower() == ".obj":
-        mesh = _read_obj(path, data, True if flip_tex_coords is None else flip_tex_coords)
-    elif path.suffix.lower() == ".ply":
-        raise MeshError(path, "not a PLY file (it does not start with 'ply')")
-    else:
-        raise MeshError(path, f"unknown mesh format {path.suffix!r} (expected .obj or .ply)")
     if len(mesh.faces) == 0:
         raise MeshError(path, "the mesh has no faces")
     return mesh
 
+
+# ---------------------------------------------------------------------------
+# Values the tracer can use (float32), for both formats
+# ---------------------------------------------------------------------------
+
+
+def _first_bad(a: np.ndarray, normal: bool = False) -> tuple[int, str] | None:
+    """(row, reason) of the first row of ``a`` float32 cannot hold, or None.
+
+    A row must be finite, and finite once rounded to float32; a normal's
+    squared length, summed in float32 as Mitsuba normalises it, must be
+    neither 0 (the normal is zero, or underflows) nor infinite.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        finite = np.isfinite(a).all(axis=1)
+        a32 = a.astype(np.float32)
+        in_range = np.isfinite(a32).all(axis=1)
+        ok = finite & in_range
+        if normal:
+            s = np.sum(a32 * a32, axis=1, dtype=np.float32)
+            ok &= (s > 0) & np.isfinite(s)
+    if ok.all():
+        return None
+    i = int(np.argmin(ok))
+    if not finite[i]:
+        why = "is not finite"
+    elif not in_range[i]:
+        why = f"is beyond float32's range (up to {FLOAT32_MAX:.4g})"
+    elif s[i] == 0:
+        why = "is zero in float32 (a normal must have a direction)"
+    else:
+        why = "is too long for float32 to normalise (its squared length overflows)"
+    return i, why
+
+
+def _show_row(a: np.ndarray, i: int) -> str:
+    return "(" + ", ".join(f"{float(x):.6g}" for x in a[i]) + ")"
 
 # ---------------------------------------------------------------------------
 # Normals
@@ -208,12 +375,19 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
     counts: list[int] = []
 
     text = data.decode("utf-8", errors="replace")
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        parts = raw.split("#", 1)[0].split()  # '#' starts a comment, also after data
+    lines = text.splitlines()
+    for lineno, raw in enumerate(lines, start=1):
+        body = raw.split("#", 1)[0]  # '#' starts a comment, also after data
+        parts = body.split()
         if not parts:
             continue
         kind = parts[0]
+        if kind not in ("v", "vt", "vn", "f"):
+            continue  # o, g, s, usemtl, mtllib, l, p, ...: not geometry we render
         try:
+            if not body.isascii() or "_" in body:
+                # Python's float() and int() read '1_0' and non-ASCII digits; Mitsuba does not.
+                raise ValueError("numbers must be plain ASCII decimals")
             if kind == "v":
                 # x y z [w] or x y z r g b (vertex colours): the position is the first three.
                 if len(parts) < 4:
@@ -227,7 +401,7 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
                 if len(parts) < 4:
                     raise ValueError("expected 'vn x y z'")
                 nrm.append(_finite(parts[1:4]))
-            elif kind == "f":
+            else:
                 if len(parts) < 4:
                     raise ValueError("a face needs at least 3 vertices")
                 np_, nt, nn = len(pos), len(tex), len(nrm)
@@ -242,7 +416,6 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
                     cn.append(_obj_index(fields[2], nn, "normal")
                               if len(fields) > 2 and fields[2] else -1)
                 counts.append(len(parts) - 1)
-            # o, g, s, usemtl, mtllib, l, p, comments, ...: not geometry we render.
         except ValueError as e:
             msg = str(e)
             if msg.startswith("refers to"):
@@ -265,19 +438,53 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
     uniq = uniq[order]
     corner_vertex = rank[inverse.reshape(-1)]
 
-    vertices = np.asarray(pos, dtype=np.float64).reshape(-1, 3)[uniq[:, 0]]
+    p = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
+    _check_obj_table(path, lines, "v", "position", p, uniq[:, 0])
+    vertices = p[uniq[:, 0]]
     uvs = normals = None
     if tex and (uniq[:, 1] >= 0).any():
         # Corners without a uv get (0, 0) (Mitsuba leaves them undefined).
         t = np.asarray(tex, dtype=np.float64).reshape(-1, 2)
+        _check_obj_table(path, lines, "vt", "texture coordinate", t, uniq[:, 1])
         if flip:
             t[:, 1] = 1.0 - t[:, 1]
         uvs = np.where((uniq[:, 1] >= 0)[:, None], t[np.maximum(uniq[:, 1], 0)], 0.0)
     if nrm and (uniq[:, 2] >= 0).all():
         # Only when every corner has one; otherwise all are computed from the faces.
-        normals = _normalized(np.asarray(nrm, dtype=np.float64)[uniq[:, 2]])
+        n = np.asarray(nrm, dtype=np.float64)
+        _check_obj_table(path, lines, "vn", "normal", n, uniq[:, 2])
+        normals = _normalized(n[uniq[:, 2]])
     faces = _fan(corner_vertex, np.asarray(counts))
     return MeshData(vertices, faces, normals, uvs)
+
+
+def _check_obj_table(path: Path, lines: list[str], kind: str, what: str, table: np.ndarray,
+                     used: np.ndarray) -> None:
+    """Refuse the first element of ``table`` the faces use that float32 cannot hold.
+
+    Elements no face uses are not checked (Mitsuba's vertex table holds only
+    the used ones), except for the finiteness every number of the file is
+    checked for as it is read.
+    """
+    rows = np.unique(used[used >= 0])
+    bad = _first_bad(table[rows], normal=kind == "vn")
+    if bad is None:
+        return
+    k = int(rows[bad[0]])
+    line = _nth_line_of_kind(lines, kind, k)
+    raise MeshError(path, f"the {what} {_show_row(table, k)} {bad[1]}", line)
+
+
+def _nth_line_of_kind(lines: list[str], kind: str, k: int) -> int | None:
+    """Line number of the k-th (0-based) ``kind`` statement, for messages."""
+    seen = 0
+    for lineno, raw in enumerate(lines, start=1):
+        parts = raw.split("#", 1)[0].split(None, 1)
+        if parts and parts[0] == kind:
+            if seen == k:
+                return lineno
+            seen += 1
+    return None
 
 
 def _finite(words: list[str]) -> list[float]:
@@ -303,363 +510,250 @@ def _obj_index(token: str, count: int, what: str) -> int:
 
 
 # ---------------------------------------------------------------------------
-# PLY
+# PLY (through plyfile)
 # ---------------------------------------------------------------------------
 
-_PLY_TYPES = {
-    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
-    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
-    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
-    "long": "i8", "int64": "i8", "ulong": "u8", "uint64": "u8",
-    "half": "f2", "float16": "f2",
-    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
-}
+#: Names of the face element's index list, and of the texture coordinates in the order
+#: of preference of Mitsuba's ply plugin.
+_INDEX_NAMES = ("vertex_indices", "vertex_index")
+_UV_NAMES = (("u", "v"), ("texture_u", "texture_v"), ("s", "t"))
+#: A header longer than this is read whole only if needed (comments can be long).
+_HEADER_CHUNK = 1 << 16
 
 
-@dataclass
-class _Prop:
-    name: str
-    dtype: str              # numpy type code of the value (of the items, for a list)
-    count_dtype: str | None = None  # numpy type code of a list's length; None: a scalar
+def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
+    """Parse an ascii or binary PLY file with plyfile; elements other than vertex and face
+    are read and dropped."""
+    from plyfile import PlyData, PlyElementParseError, PlyHeaderParseError
 
-
-@dataclass
-class _Element:
-    name: str
-    count: int
-    props: list[_Prop]
-
-
-def _parse_ply_header(path: Path, data: bytes) -> tuple[str, list[_Element], int]:
-    """(format, elements, offset of the body) of a PLY file."""
-    end = data.find(b"end_header")
+    fh.seek(0)
+    head = fh.read(_HEADER_CHUNK)
+    end = head.find(b"end_header")
+    if end < 0 and len(head) == _HEADER_CHUNK:
+        head += fh.read()
+        end = head.find(b"end_header")
     if end < 0:
         raise MeshError(path, "PLY header has no 'end_header'")
-    nl = data.find(b"\n", end)
-    body = len(data) if nl < 0 else nl + 1
-    fmt = None
-    elements: list[_Element] = []
-    lines = data[:end + len(b"end_header")].decode("latin-1").splitlines()
-    for lineno, line in enumerate(lines, start=1):
-        tok = line.split()
-        if not tok or tok[0] in ("comment", "obj_info", "ply", "end_header"):
-            continue
-        bad = MeshError(path, f"malformed PLY header line: {line.strip()[:60]!r}", lineno)
-        if tok[0] == "format":
-            if len(tok) != 3 or tok[1] not in ("ascii", "binary_little_endian",
-                                               "binary_big_endian"):
-                raise bad
-            fmt = tok[1]
-        elif tok[0] == "element":
-            if len(tok) != 3 or not tok[2].isdigit():
-                raise bad
-            elements.append(_Element(tok[1], int(tok[2]), []))
-        elif tok[0] == "property":
-            if not elements:
-                raise bad
-            if len(tok) == 5 and tok[1] == "list":
-                if tok[2] not in _PLY_TYPES or tok[3] not in _PLY_TYPES:
-                    raise MeshError(path, f"unknown PLY type in {line.strip()!r}", lineno)
-                if _PLY_TYPES[tok[2]][0] == "f":
-                    raise MeshError(path, f"a list length must be an integer type: "
-                                          f"{line.strip()!r}", lineno)
-                elements[-1].props.append(_Prop(tok[4], _PLY_TYPES[tok[3]], _PLY_TYPES[tok[2]]))
-            elif len(tok) == 3:
-                if tok[1] not in _PLY_TYPES:
-                    raise MeshError(path, f"unknown PLY type in {line.strip()!r}", lineno)
-                elements[-1].props.append(_Prop(tok[2], _PLY_TYPES[tok[1]]))
-            else:
-                raise bad
-        else:
-            raise bad
-    if fmt is None:
-        raise MeshError(path, "PLY header has no 'format' line")
-    return fmt, elements, body
+    nl = head.find(b"\n", end)
+    header = head[:len(head) if nl < 0 else nl + 1]
+    header_lines = header.count(b"\n") if nl >= 0 else header.count(b"\n") + 1
+    _check_ply_header(path, header, size)
+    ascii_ = re.search(rb"^format[ \t]+ascii\b", header, re.M) is not None
+    body_lines: list[bytes] | None = None
+    if ascii_:
+        check_memory("text")
+        fh.seek(0)
+        body = fh.read()[len(header):]
+        if b"_" in body:  # Python (and so plyfile) reads '1_0' as 10; it is not a PLY number
+            line = header_lines + body[:body.index(b"_")].count(b"\n") + 1
+            raise MeshError(path, "malformed number in the PLY body (a '_' in it)", line)
+        body_lines = body.splitlines()
+
+    def where(element: str, row: int | None) -> int | None:
+        """Line of record ``row`` of ``element`` in an ascii file (one record a line)."""
+        if body_lines is None or row is None:
+            return None
+        before = 0
+        for el in ply_elements:
+            if el[0] == element:
+                return header_lines + before + row + 1
+            before += el[1]
+        return None
+
+    ply_elements: list[tuple[str, int]] = []
+    fh.seek(0)
+    try:
+        with warnings.catch_warnings():
+            # plyfile reads an empty ascii list through numpy.loadtxt, which warns.
+            warnings.simplefilter("ignore", UserWarning)
+            try:
+                # A triangle mesh's faces are read in one piece; other lists record by record.
+                ply = PlyData.read(fh, mmap="c", known_list_len={
+                    "face": dict.fromkeys(_INDEX_NAMES, 3)})
+            except PlyElementParseError as e:
+                if e.message != "unexpected list length":
+                    raise
+                fh.seek(0)
+                ply = PlyData.read(fh, mmap=False)
+        consumed = None if ascii_ else fh.tell()
+    except PlyHeaderParseError as e:
+        line = _header_line(header, e.line)
+        msg = e.message
+        if msg.startswith("field type"):  # "field type 'floot' not in [every type]"
+            msg = "unknown PLY type " + msg.split()[2]
+        raise MeshError(path, f"malformed PLY header line ({msg}): {line!r}", e.line) from None
+    except PlyElementParseError as e:
+        ply_elements = _declared_elements(header)
+        name = e.element.name if e.element is not None else "?"
+        line = where(name, e.row)
+        raise MeshError(path, _element_message(e, name, body_lines, line, header_lines),
+                        line) from None
+    except UnicodeDecodeError as e:  # plyfile decodes ascii bodies as ASCII
+        line = None
+        if body_lines is not None:
+            bad = next(i for i, b in enumerate(body_lines) if not b.isascii())
+            line = header_lines + bad + 1
+        raise MeshError(path, f"the PLY body is not ASCII text ({e.reason})", line) from None
+    except (ValueError, MemoryError, OverflowError) as e:  # left after the header checks
+        raise MeshError(path, f"cannot read the PLY file ({e})") from None
+
+    ply_elements = [(el.name, el.count) for el in ply.elements]
+    if ascii_:
+        records = sum(n for _, n in ply_elements)
+        rest = body_lines[records:]
+        extra = next((i for i, b in enumerate(rest) if b.strip()), None)
+        if extra is not None:
+            raise MeshError(path, "PLY file has data after its last element",
+                            header_lines + records + extra + 1)
+    elif consumed is not None and consumed < size:
+        fh.seek(consumed)
+        tail = fh.read(min(size - consumed, 4096))
+        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
+        if size - consumed > 4096 or tail.strip(b"\r\n\x00 "):
+            raise MeshError(path, "PLY file has data after its last element")
+    return _ply_mesh(path, ply, flip, where)
 
 
-def _read_ply(path: Path, data: bytes, flip: bool) -> MeshData:
-    """Parse an ascii or binary PLY file; elements other than vertex and face are skipped."""
-    fmt, elements, body = _parse_ply_header(path, data)
-    if fmt == "ascii":
-        reader = _AsciiBody(path, data[body:], data[:body].count(b"\n"))
-    else:
-        reader = _BinaryBody(path, data, body, "<" if fmt == "binary_little_endian" else ">")
-    values: dict[str, dict[str, np.ndarray]] = {}
-    for el in elements:
-        wanted = el.name in ("vertex", "face")
-        values[el.name] = reader.element(el, keep=wanted)
-    reader.finish()
+def _check_ply_header(path: Path, header: bytes, size: int) -> None:
+    """What plyfile lets through: non-ASCII bytes, and element counts that are not plain
+    decimal integers (``5_0``, ``-5``, a superscript digit) or that the file cannot hold."""
+    if not header.isascii():
+        at = next(i for i, b in enumerate(header) if b > 127)
+        line = header[:at].count(b"\n") + 1
+        text = header.splitlines()[line - 1].decode("utf-8", errors="replace").strip()
+        raise MeshError(path, f"PLY header line is not ASCII text: {text[:60]!r}", line)
+    for line, (name, count) in _element_lines(header):
+        if not re.fullmatch(rb"[0-9]+", count):
+            raise MeshError(path, f"malformed PLY header line (element count "
+                                  f"{count.decode()!r} is not a decimal integer): "
+                                  f"{_header_line(header, line)!r}", line)
+        if int(count) > size:  # every record takes at least one byte
+            raise MeshError(path, f"PLY header declares {int(count):,} '{name.decode()}' "
+                                  f"records, more than a {size:,}-byte file can hold", line)
 
-    if "vertex" not in values:
+
+def _element_lines(header: bytes) -> list[tuple[int, tuple[bytes, bytes]]]:
+    out = []
+    for i, raw in enumerate(header.splitlines(), start=1):
+        tok = raw.split()
+        if tok[:1] == [b"element"] and len(tok) == 3:
+            out.append((i, (tok[1], tok[2])))
+    return out
+
+
+def _declared_elements(header: bytes) -> list[tuple[str, int]]:
+    return [(n.decode(), int(c)) for _, (n, c) in _element_lines(header)]
+
+
+def _header_line(header: bytes, line: int | None) -> str:
+    lines = header.splitlines()
+    if line is None or not 1 <= line <= len(lines):
+        return ""
+    return lines[line - 1].decode("ascii", errors="replace").strip()[:60]
+
+
+def _element_message(e, name: str, body_lines, line, header_lines) -> str:
+    """One line for a plyfile element error: what was wrong, in which record and property."""
+    rec = f"element '{name}'" + (f", record {e.row}" if e.row is not None else "")
+    prop = f", property '{e.prop.name}'" if e.prop is not None else ""
+    if e.message == "early end-of-file":
+        return f"PLY file ends inside element '{name}'" + (
+            f" (after {e.row:,} of {e.element.count:,} records)" if e.row is not None else "")
+    if e.message == "malformed input" and body_lines is not None and line is not None:
+        integer = e.prop is not None and np.dtype(e.prop.val_dtype).kind in "iu"
+        token = _bad_token(body_lines[line - header_lines - 1], integer)
+        expected = "an integer" if integer else "a number"
+        return f"expected {expected} in {rec}{prop}, got {token!r}"
+    if e.message == "early end-of-line":
+        return f"{rec}{prop}: the line ends early (a PLY record is one line)"
+    if e.message == "expected end-of-line":
+        return f"{rec}: more numbers on the line than the header declares"
+    return f"malformed PLY {rec}{prop}: {e.message}"
+
+
+def _bad_token(line: bytes, integer: bool) -> str:
+    for tok in line.decode("ascii", errors="replace").split():
+        try:
+            int(tok) if integer else float(tok)
+        except ValueError:
+            return tok[:30]
+    return line.decode("ascii", errors="replace").strip()[:30]
+
+
+def _ply_mesh(path: Path, ply, flip: bool, where) -> MeshData:
+    """The mesh of a parsed PLY file: its 'vertex' and 'face' elements, checked."""
+    if "vertex" not in ply:
         raise MeshError(path, "PLY file has no 'vertex' element")
-    vert = values["vertex"]
+    vert = ply["vertex"].data
+    names = vert.dtype.names or ()
     for c in "xyz":
-        if c not in vert:
+        if c not in names:
             raise MeshError(path, f"PLY vertex element has no property '{c}'")
-    vertices = np.stack([vert[c] for c in "xyz"], axis=1).astype(np.float64)
-    if not np.isfinite(vertices).all():
-        bad = int(np.argmax(~np.isfinite(vertices).all(axis=1)))
-        raise MeshError(path, f"PLY vertex {bad} has a coordinate that is not finite")
+
+    def column_block(cols) -> np.ndarray:
+        return np.stack([np.asarray(vert[c], dtype=np.float64) for c in cols], axis=1)
+
+    def check(a, what, normal=False):
+        bad = _first_bad(a, normal)
+        if bad is not None:
+            raise MeshError(path, f"PLY vertex {bad[0]}: the {what} {_show_row(a, bad[0])} "
+                                  f"{bad[1]}", where("vertex", bad[0]))
+
+    vertices = column_block("xyz")
+    check(vertices, "position")
     normals = uvs = None
-    if all(c in vert for c in ("nx", "ny", "nz")):
-        normals = _normalized(np.stack([vert[c] for c in ("nx", "ny", "nz")], axis=1))
-    # The texture-coordinate names Mitsuba's ply plugin accepts, in its order of preference.
-    for un, vn in (("u", "v"), ("texture_u", "texture_v"), ("s", "t")):
-        if un in vert and vn in vert:
-            uvs = np.stack([vert[un], vert[vn]], axis=1).astype(np.float64)
+    if all(c in names for c in ("nx", "ny", "nz")):
+        n = column_block(("nx", "ny", "nz"))
+        check(n, "normal", normal=True)
+        normals = _normalized(n)
+    for un, vn in _UV_NAMES:
+        if un in names and vn in names:
+            uvs = column_block((un, vn))
+            check(uvs, "texture coordinate")
             if flip:
                 uvs[:, 1] = 1.0 - uvs[:, 1]
             break
 
-    face = values.get("face")
-    if face is None:
+    if "face" not in ply:
         raise MeshError(path, "the mesh has no faces (no 'face' element)")
-    key = next((k for k in ("vertex_index", "vertex_indices") if k in face), None)
-    if key is None:
+    face = ply["face"]
+    key = next((k for k in _INDEX_NAMES if k in (face.data.dtype.names or ())), None)
+    prop = face.ply_property(key) if key is not None else None
+    if prop is None or not hasattr(prop, "len_dtype"):
         raise MeshError(path, "PLY face element has no 'vertex_indices' (or 'vertex_index') "
                               "list")
-    counts, flat = face[key]
+    if np.dtype(prop.len_dtype).kind not in "iu":
+        raise MeshError(path, f"PLY face list '{key}' has a length of type "
+                              f"{np.dtype(prop.len_dtype).name}; a length must be an integer")
+    col = face.data[key]
+    if col.dtype != object:  # the one-piece read: a (F, 3) array
+        counts = np.full(len(col), col.shape[1] if col.ndim == 2 else 0, dtype=np.int64)
+        flat = np.asarray(col).reshape(-1)
+    else:
+        counts = np.fromiter((len(a) for a in col), dtype=np.int64, count=len(col))
+        flat = (np.concatenate([np.asarray(a) for a in col]) if len(col)
+                else np.zeros(0, dtype=np.int64))
     if len(counts) and counts.min() < 3:
-        raise MeshError(path, f"PLY face {int(np.argmax(counts < 3))} has fewer than 3 "
-                              "vertices")
-    flat = flat.astype(np.int64)
-    bad = (flat < 0) | (flat >= len(vertices))
+        k = int(np.argmax(counts < 3))
+        raise MeshError(path, f"PLY face {k} has fewer than 3 vertices", where("face", k))
+
+    def face_of(i: int) -> int:
+        return int(np.searchsorted(np.cumsum(counts), i, side="right"))
+
+    if flat.dtype.kind == "f":  # a float index list: only integer values name a vertex
+        bad = ~np.isfinite(flat) | (flat != np.floor(flat))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise MeshError(path, f"PLY face {face_of(i)} has a non-integer vertex index "
+                                  f"{float(flat[i]):g}", where("face", face_of(i)))
+    nv = len(vertices)
+    bad = (flat < 0) | (flat >= nv)
     if bad.any():
-        raise MeshError(path, f"bad index: face refers to vertex {int(flat[np.argmax(bad)])} "
-                              f"but the file has {len(vertices)} vertices (0-based)")
-    return MeshData(vertices, _fan(flat, counts), normals, uvs)
-
-
-class _BinaryBody:
-    """Reads the elements of a binary PLY body one after the other."""
-
-    def __init__(self, path: Path, data: bytes, offset: int, order: str):
-        self.path, self.data, self.offset, self.order = path, data, offset, order
-
-    def _need(self, nbytes: int, el: _Element) -> None:
-        if self.offset + nbytes > len(self.data):
-            raise MeshError(self.path, f"PLY file ends inside element '{el.name}'")
-
-    def element(self, el: _Element, keep: bool) -> dict:
-        o = self.order
-        if not any(p.count_dtype for p in el.props):
-            dt = np.dtype([(f"p{i}", o + p.dtype) for i, p in enumerate(el.props)])
-            self._need(dt.itemsize * el.count, el)
-            rec = np.frombuffer(self.data, dt, el.count, self.offset)
-            self.offset += dt.itemsize * el.count
-            return {p.name: rec[f"p{i}"] for i, p in enumerate(el.props)} if keep else {}
-        # Lists: first assume every list has the length of the first record's list
-        # (true of triangle or quad meshes), read all records at once and check that.
-        fast = self._uniform(el, keep)
-        if fast is not None:
-            return fast
-        return self._walk(el, keep)
-
-    def _first_counts(self, el: _Element) -> list[int] | None:
-        off, out = self.offset, []
-        for p in el.props:
-            if p.count_dtype:
-                size = np.dtype(p.count_dtype).itemsize
-                if off + size > len(self.data):
-                    return None
-                n = int(np.frombuffer(self.data, self.order + p.count_dtype, 1, off)[0])
-                out.append(n)
-                off += size + n * np.dtype(p.dtype).itemsize
-            else:
-                off += np.dtype(p.dtype).itemsize
-        return out
-
-    def _uniform(self, el: _Element, keep: bool) -> dict | None:
-        if el.count == 0:
-            return {p.name: (np.zeros(0, np.int64), np.zeros(0)) if p.count_dtype
-                    else np.zeros(0) for p in el.props}
-        first = self._first_counts(el)
-        if first is None or min(first) < 0:
-            return None
-        o, fields, k = self.order, [], 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                fields += [(f"c{i}", o + p.count_dtype)]
-                if first[k]:
-                    fields += [(f"p{i}", o + p.dtype, (first[k],))]
-                k += 1
-            else:
-                fields += [(f"p{i}", o + p.dtype)]
-        dt = np.dtype(fields)
-        if self.offset + dt.itemsize * el.count > len(self.data):
-            return None
-        rec = np.frombuffer(self.data, dt, el.count, self.offset)
-        k = 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                if np.any(rec[f"c{i}"] != first[k]):
-                    return None
-                k += 1
-        self.offset += dt.itemsize * el.count
-        if not keep:
-            return {}
-        out, k = {}, 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                n = first[k]
-                k += 1
-                flat = rec[f"p{i}"].reshape(-1) if n else np.zeros(0, p.dtype)
-                out[p.name] = (np.full(el.count, n, np.int64), flat)
-            else:
-                out[p.name] = rec[f"p{i}"]
-        return out
-
-    def _walk(self, el: _Element, keep: bool) -> dict:
-        """Record by record, for lists of varying length (polygon meshes of mixed degree)."""
-        cols: dict[str, list] = {p.name: [] for p in el.props}
-        lens: dict[str, list] = {p.name: [] for p in el.props if p.count_dtype}
-        data, o = self.data, self.order
-        sizes = [(np.dtype(p.dtype).itemsize,
-                  np.dtype(p.count_dtype).itemsize if p.count_dtype else 0) for p in el.props]
-        off = self.offset
-        for _ in range(el.count):
-            for p, (size, csize) in zip(el.props, sizes, strict=True):
-                if p.count_dtype:
-                    self.offset = off
-                    self._need(csize, el)
-                    n = int(np.frombuffer(data, o + p.count_dtype, 1, off)[0])
-                    off += csize
-                    if n < 0:
-                        raise MeshError(self.path, f"negative list length in '{el.name}'")
-                    self.offset = off
-                    self._need(n * size, el)
-                    if keep:
-                        cols[p.name].append(np.frombuffer(data, o + p.dtype, n, off))
-                        lens[p.name].append(n)
-                    off += n * size
-                else:
-                    self.offset = off
-                    self._need(size, el)
-                    if keep:
-                        cols[p.name].append(np.frombuffer(data, o + p.dtype, 1, off))
-                    off += size
-        self.offset = off
-        if not keep:
-            return {}
-        out = {}
-        for p in el.props:
-            flat = np.concatenate(cols[p.name]) if cols[p.name] else np.zeros(0, p.dtype)
-            out[p.name] = (np.asarray(lens[p.name], np.int64), flat) if p.count_dtype else flat
-        return out
-
-    def finish(self) -> None:
-        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
-        if self.data[self.offset:].strip(b"\r\n\x00 "):
-            raise MeshError(self.path, "PLY file has data after its last element")
-
-
-class _AsciiBody:
-    """Reads the elements of an ascii PLY body from its whitespace-separated tokens."""
-
-    def __init__(self, path: Path, body: bytes, header_lines: int):
-        self.path, self.body, self.header_lines = path, body, header_lines
-        self.tokens = body.split()
-        self.pos = 0
-
-    def _numbers(self, n: int, el: _Element) -> np.ndarray:
-        if self.pos + n > len(self.tokens):
-            raise MeshError(self.path, f"PLY file ends inside element '{el.name}'")
-        chunk = self.tokens[self.pos:self.pos + n]
-        try:
-            out = np.array(chunk, dtype=np.float64) if n else np.zeros(0)
-        except ValueError:
-            bad = next(i for i, t in enumerate(chunk) if not _is_number(t))
-            raise MeshError(self.path, f"expected a number in element '{el.name}', got "
-                                       f"{chunk[bad].decode('latin-1')[:30]!r}",
-                            self._line_of(self.pos + bad)) from None
-        self.pos += n
-        return out
-
-    def _line_of(self, token: int) -> int:
-        """Line number (of the whole file) of the token with this index, for messages."""
-        header_lines = self.header_lines
-        count = 0
-        for i, line in enumerate(self.body.splitlines(), start=1):
-            count += len(line.split())
-            if count > token:
-                return header_lines + i
-        return header_lines + len(self.body.splitlines())
-
-    def element(self, el: _Element, keep: bool) -> dict:
-        n_props = len(el.props)
-        if not any(p.count_dtype for p in el.props):
-            rec = self._numbers(el.count * n_props, el).reshape(el.count, n_props)
-            return {p.name: rec[:, i] for i, p in enumerate(el.props)} if keep else {}
-        # Try: all lists as long as the first record's (one record = fixed token count).
-        uniform = self._uniform(el)
-        if uniform is not None:
-            width, list_at = uniform
-            rec = self._numbers(el.count * width, el).reshape(el.count, width)
-            out = {}
-            for p, (start, n) in zip(el.props, list_at, strict=True):
-                if p.count_dtype:
-                    if np.any(rec[:, start] != n):
-                        self.pos -= el.count * width
-                        return self._walk(el, keep)
-                    out[p.name] = (np.full(el.count, n, np.int64),
-                                   rec[:, start + 1:start + 1 + n].reshape(-1))
-                else:
-                    out[p.name] = rec[:, start]
-            return out if keep else {}
-        return self._walk(el, keep)
-
-    def _uniform(self, el: _Element) -> tuple[int, list[tuple[int, int]]] | None:
-        pos, at, width = self.pos, [], 0
-        for p in el.props:
-            if p.count_dtype:
-                if pos >= len(self.tokens) or not self.tokens[pos].isdigit():
-                    return None
-                n = int(self.tokens[pos])
-                at.append((width, n))
-                width += 1 + n
-                pos += 1 + n
-            else:
-                at.append((width, 1))
-                width += 1
-                pos += 1
-        if el.count == 0 or self.pos + width * el.count > len(self.tokens):
-            return None
-        return width, at
-
-    def _walk(self, el: _Element, keep: bool) -> dict:
-        cols: dict[str, list] = {p.name: [] for p in el.props}
-        lens: dict[str, list] = {p.name: [] for p in el.props if p.count_dtype}
-        for _ in range(el.count):
-            for p in el.props:
-                if p.count_dtype:
-                    n = self._numbers(1, el)[0]
-                    if n < 0 or n != int(n):
-                        raise MeshError(self.path, f"bad list length {n} in '{el.name}'",
-                                        self._line_of(self.pos - 1))
-                    cols[p.name].append(self._numbers(int(n), el))
-                    lens[p.name].append(int(n))
-                else:
-                    cols[p.name].append(self._numbers(1, el))
-        if not keep:
-            return {}
-        out = {}
-        for p in el.props:
-            flat = np.concatenate(cols[p.name]) if cols[p.name] else np.zeros(0)
-            out[p.name] = (np.asarray(lens[p.name], np.int64), flat) if p.count_dtype else flat
-        return out
-
-    def finish(self) -> None:
-        if self.pos != len(self.tokens):
-            raise MeshError(self.path, "PLY file has data after its last element",
-                            self._line_of(self.pos))
-
-
-def _is_number(token: bytes) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
+        i = int(np.argmax(bad))
+        raise MeshError(path, f"bad index: face {face_of(i)} refers to vertex "
+                              f"{flat[i]:g} but the file has {nv} vertices (0-based)",
+                        where("face", face_of(i)))
+    return MeshData(vertices, _fan(flat.astype(np.int64), counts), normals, uvs)
 
 
 if __name__ == "__main__":  # pragma: no cover - a quick look at a file
