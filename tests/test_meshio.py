@@ -234,6 +234,20 @@ def test_ply_unknown_properties_and_elements_are_skipped(tmp_path, fmt):
     assert m.normals is None and m.uvs is None
 
 
+@pytest.mark.parametrize("newline", ["\n", "\r\n", "\r"])
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian"])
+def test_ply_lines_may_end_in_lf_crlf_or_cr(tmp_path, fmt, newline):
+    p = write_ply(tmp_path / "a.ply", fmt, [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES)])
+    head, body = p.read_bytes().split(b"end_header\n")
+    if fmt == "ascii":
+        body = body.replace(b"\n", newline.encode())
+    p.write_bytes(head.replace(b"\n", newline.encode()) + b"end_header" + newline.encode()
+                  + body)
+    np.testing.assert_array_equal(load_mesh(p).faces, [[0, 1, 2], [0, 2, 3], [0, 1, 4]])
+    if fmt == "ascii":  # and line numbers count those lines
+        p.write_bytes(p.read_bytes().replace(b"0.5 0.5 1.0", b"0.5 oops 1.0"))
+        check_error(p, ":15:", "'oops'")
+
 def test_ply_equals_mitsubas_reading(tmp_path, mi):
     props = XYZ + [("nx", "float"), ("ny", "float"), ("nz", "float"),
                    ("u", "float"), ("v", "float")]
@@ -655,8 +669,9 @@ def test_loading_an_unchanged_file_again_reuses_the_parsed_mesh(tmp_path, parses
     assert parses == ["a.obj"] and again is first
     with pytest.raises(ValueError):
         first.vertices[0, 0] = 7.0  # shared, so read-only
-    # Another reading of the texture coordinates is another mesh.
+    # Another reading of the texture coordinates is another mesh; both are kept.
     load_mesh(path, flip_tex_coords=False)
+    assert load_mesh(path) is first and load_mesh(path, flip_tex_coords=False) is not first
     assert parses == ["a.obj", "a.obj"]
     # A changed file (size, modification time) is parsed again.
     path.write_text(SQUARE + "f 1 2 3\nf 1 3 4\n")
@@ -688,3 +703,20 @@ def test_the_cache_is_bounded_least_recently_used_first_out(tmp_path, parses, mo
     load_mesh(files[1])
     load_mesh(files[1])
     assert parses[-2:] == ["b.obj", "b.obj"]
+
+
+def test_a_file_changed_while_it_is_read_is_not_cached(tmp_path, parses, monkeypatch):
+    from tracer import meshio
+
+    path = write(tmp_path, "a.obj", SQUARE + "f 1 2 3\n")
+    counting = meshio._read_mesh
+
+    def read_then_edit(p, *a, **k):
+        mesh = counting(p, *a, **k)
+        path.write_text(SQUARE + "f 1 2 3\nf 1 3 4\n")  # another writer, mid-read
+        return mesh
+
+    monkeypatch.setattr(meshio, "_read_mesh", read_then_edit)
+    assert len(load_mesh(path).faces) == 1
+    monkeypatch.setattr(meshio, "_read_mesh", counting)
+    assert len(load_mesh(path).faces) == 2 and parses == ["a.obj", "a.obj"]

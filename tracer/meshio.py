@@ -156,25 +156,31 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
         does not have, holds values float32 cannot represent, or has no faces.
     """
     path = Path(path)
-    st = _stat_regular(path)
-    key = (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
-           st.st_ctime_ns, flip_tex_coords)
+    key = _identity(path) + (flip_tex_coords,)
     mesh = _cache.get(key)
     if mesh is not None:
         _cache.move_to_end(key)
         return mesh
-    mesh = _read_mesh(path, st.st_size, flip_tex_coords)
-    _remember(key, mesh)
-    return mesh
-
-
-def _remember(key: tuple, mesh: MeshData) -> None:
-    """Cache ``mesh`` (arrays made read-only), dropping older versions of the file and the
-    least recently used meshes beyond the bounds."""
+    mesh = _read_mesh(path, key[3], flip_tex_coords)
     for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
         if a is not None:
             a.flags.writeable = False
-    for old in [k for k in _cache if k[0] == key[0]]:
+    if _identity(path) == key[:-1]:  # not cached if the file changed while it was read
+        _remember(key, mesh)
+    return mesh
+
+
+def _identity(path: Path) -> tuple:
+    """(resolved path, device, inode, size, modification and change time in ns)."""
+    st = _stat_regular(path)
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+            st.st_ctime_ns)
+
+
+def _remember(key: tuple, mesh: MeshData) -> None:
+    """Cache ``mesh``, dropping older versions of the file and the least recently used
+    meshes beyond the bounds."""
+    for old in [k for k in _cache if k[0] == key[0] and k[1:-1] != key[1:-1]]:
         del _cache[old]  # an older version of the same file
     if mesh.nbytes > CACHE_MAX_BYTES:
         return
@@ -534,11 +540,12 @@ def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
         end = head.find(b"end_header")
     if end < 0:
         raise MeshError(path, "PLY header has no 'end_header'")
-    nl = head.find(b"\n", end)
-    header = head[:len(head) if nl < 0 else nl + 1]
-    header_lines = header.count(b"\n") if nl >= 0 else header.count(b"\n") + 1
+    end += len(b"end_header")
+    end += 2 if head[end:end + 2] == b"\r\n" else 1 if head[end:end + 1] in (b"\n", b"\r") else 0
+    header = head[:end]  # with its last newline: LF, CRLF or CR, as plyfile reads them
+    header_lines = len(header.splitlines())
     _check_ply_header(path, header, size)
-    ascii_ = re.search(rb"^format[ \t]+ascii\b", header, re.M) is not None
+    ascii_ = any(line.split()[:2] == [b"format", b"ascii"] for line in header.splitlines())
     body_lines: list[bytes] | None = None
     if ascii_:
         check_memory("text")
@@ -619,7 +626,7 @@ def _check_ply_header(path: Path, header: bytes, size: int) -> None:
     decimal integers (``5_0``, ``-5``, a superscript digit) or that the file cannot hold."""
     if not header.isascii():
         at = next(i for i, b in enumerate(header) if b > 127)
-        line = header[:at].count(b"\n") + 1
+        line = len(header[:at + 1].splitlines())
         text = header.splitlines()[line - 1].decode("utf-8", errors="replace").strip()
         raise MeshError(path, f"PLY header line is not ASCII text: {text[:60]!r}", line)
     for line, (name, count) in _element_lines(header):
