@@ -4,11 +4,14 @@ import contextlib
 import io
 import math
 import os
+import re
 import struct
 from pathlib import Path
 
 import numpy as np
 import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
 
 from tracer.errors import UserError
 from tracer.meshio import MeshData, MeshError, compute_vertex_normals, face_normals, load_mesh
@@ -720,3 +723,118 @@ def test_a_file_changed_while_it_is_read_is_not_cached(tmp_path, parses, monkeyp
     assert len(load_mesh(path).faces) == 1
     monkeypatch.setattr(meshio, "_read_mesh", counting)
     assert len(load_mesh(path).faces) == 2 and parses == ["a.obj", "a.obj"]
+
+
+# --------------------------------------------------------------------------- fuzzing
+# Any damage to a valid file (bytes changed, inserted, deleted, the file cut short, a
+# hostile token put in) must give a mesh the tracer can use or a one-line MeshError, and
+# nothing else: no other exception, no NaN, no index out of range.
+
+
+def _seed_files() -> list[tuple[str, bytes]]:
+    import tempfile
+
+    props = NXYZ + [("u", "float"), ("v", "float")]
+    rows = [v + (0.0, 0.6, 0.8, 0.1 * i, 0.2) for i, v in enumerate(VERTS)]
+    polys = [([0, 1, 2, 3],), ([0, 1, 4],), ([3, 2, 4, 1, 0],)]
+    out = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for fmt in ("ascii", "binary_little_endian", "binary_big_endian"):
+            for faces, fprop in ((FACES, FACE_PROP),
+                                 (polys, [("vertex_index", "list", "int", "uint")])):
+                p = write_ply(Path(tmp) / "s.ply", fmt, [("vertex", props, rows),
+                                                         ("face", fprop, faces)])
+                out.append((".ply", p.read_bytes()))
+    out.append((".obj", (SQUARE + "v 0.5 0.5 1\nvt 0 0\nvt 1 0\nvt 1 1\nvn 0 0 1\n"
+                         "vn 0 0.6 0.8\nf 1/1/1 2/2/1 3/3/2 4/1/2\nf -1/-1/-1 -2/-2/-2 "
+                         "-3/-3/-1\n# end\n").encode()))
+    out.append((".obj", (SQUARE + "f 1 2 3\nf 1 3 4\n").encode()))
+    return out
+
+
+SEEDS = _seed_files()
+#: Numbers a reader must refuse or read exactly: non-finite, beyond float32, subnormal,
+#: non-integer where an index is due, out of range, not plain ASCII decimals.
+NUMBERS = [b"nan", b"inf", b"-inf", b"1e39", b"-1e39", b"1e-45", b"1e-30", b"1.5", b"-7",
+           b"0", b"999999", b"4294967295", b"\xd9\xa3", b"\xb2", b"1_0", b"0x10"]
+HOSTILE = NUMBERS + [b"-", b".", b"\n", b"\r", b" ", b"/", b"//", b"#", b"f 1 2 3\n",
+                     b"v 0 0\n", b"end_header\n", b"element face 9\n",
+                     b"property list uchar float vertex_indices\n"]
+#: Binary values written over one property of a binary PLY: NaN, infinities, a float
+#: index, indices out of range, in both byte orders.
+WORDS = [struct.pack(f, x) for x in (math.nan, math.inf, -math.inf, 1e-45, 1.5)
+         for f in ("<f", ">f")] + [struct.pack(f, x) for x in (-1, 5, 10**6)
+                                    for f in ("<i", ">i")]
+
+
+@st.composite
+def damaged_meshes(draw):
+    suffix = draw(st.sampled_from([".ply", ".obj"]))  # as many OBJ cases as PLY ones
+    data = draw(st.sampled_from([d for s, d in SEEDS if s == suffix]))
+    data = bytearray(data)
+    body = data.find(b"end_header\n") + len(b"end_header\n") if suffix == ".ply" else 0
+    binary = suffix == ".ply" and b"format binary" in data[:body]
+    for _ in range(draw(st.integers(1, 3))):
+        op = draw(st.sampled_from(["value", "value", "value", "byte", "insert", "delete",
+                                   "cut"]))
+        at = draw(st.integers(0, max(len(data) - 1, 0)))
+        if op == "value" and binary:  # one property (4 bytes, aligned) of the body
+            k = draw(st.integers(0, max((len(data) - body) // 4 - 1, 0)))
+            w = draw(st.sampled_from(WORDS))
+            data[body + 4 * k:body + 4 * k + 4] = w
+        elif op == "value":  # one number of the body replaced: the structure stays
+            spans = [m.span() for m in re.finditer(rb"[^ \t\r\n/]+", data) if m.start() >= body
+                     and m.group() not in (b"v", b"vt", b"vn", b"f")]
+            a, b = spans[draw(st.integers(0, len(spans) - 1))] if spans else (0, 0)
+            data[a:b] = draw(st.sampled_from(NUMBERS))
+        elif op == "byte" and data:
+            data[at] = draw(st.integers(0, 255))
+        elif op == "insert":
+            data[at:at] = draw(st.sampled_from(HOSTILE))
+        elif op == "delete":
+            del data[at:at + draw(st.integers(1, 12))]
+        else:
+            del data[at:]
+    return suffix, bytes(data)
+
+
+def mesh_contract(tmp_path_factory, suffix: str, data: bytes) -> None:
+    from tracer import meshio
+
+    path = tmp_path_factory.mktemp("mesh") / ("m" + suffix)
+    path.write_bytes(data)
+    meshio.clear_cache()
+    try:
+        m = load_mesh(path)
+    except MeshError as e:
+        assert "\n" not in str(e) and str(path) in str(e)
+        return
+    f32 = np.float32
+    assert m.faces.ndim == 2 and m.faces.shape[1] == 3 and len(m.faces) > 0
+    assert m.faces.min() >= 0 and m.faces.max() < len(m.vertices)
+    for a in (m.vertices, m.normals, m.uvs):
+        if a is not None:
+            with np.errstate(over="ignore"):
+                assert np.isfinite(a.astype(f32)).all()
+    if m.normals is not None:
+        np.testing.assert_allclose(np.linalg.norm(m.normals, axis=1), 1, rtol=1e-6)
+
+
+@settings(settings(derandomize=True, deadline=None, database=None,
+                   suppress_health_check=[HealthCheck.too_slow,
+                                          HealthCheck.function_scoped_fixture]),
+          max_examples=400)
+@given(damaged_meshes())
+def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line(tmp_path_factory,
+                                                                         case):
+    mesh_contract(tmp_path_factory, *case)
+
+
+@pytest.mark.slow
+@settings(deadline=None, suppress_health_check=[HealthCheck.too_slow,
+                                                HealthCheck.function_scoped_fixture],
+          max_examples=5000)
+@given(damaged_meshes())
+def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line_long(
+        tmp_path_factory, case):
+    mesh_contract(tmp_path_factory, *case)

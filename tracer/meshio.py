@@ -57,6 +57,7 @@ File Format" (1994).
 
 from __future__ import annotations
 
+import io
 import math
 import os
 import re
@@ -80,7 +81,7 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 #: Bytes of memory reading a mesh may take per byte of its file, as upper bounds for the
 #: WHITTED_MAX_MEMORY check made before reading: text (OBJ, ascii PLY) and binary PLY.
 #: Peaks measured with tracemalloc on 2.4-5 MB files: OBJ of v and f lines 23x its size,
-#: of v/vt/vn lines 15x, ascii PLY 14x; binary PLY of triangles 3.3x, of mixed polygons
+#: of v/vt/vn lines 15x, ascii PLY 19x; binary PLY of triangles 3.3x, of mixed polygons
 #: (read record by record) 16x. The bounds leave a margin of about 1.4 over the largest.
 MEMORY_PER_FILE_BYTE = {"text": 32, "binary": 24}
 
@@ -266,7 +267,7 @@ def _first_bad(a: np.ndarray, normal: bool = False) -> tuple[int, str] | None:
         return None
     i = int(np.argmin(ok))
     if not finite[i]:
-        why = "is not finite"
+        why = "is not finite (in float32)"
     elif not in_range[i]:
         why = f"is beyond float32's range (up to {FLOAT32_MAX:.4g})"
     elif s[i] == 0:
@@ -547,14 +548,25 @@ def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
     _check_ply_header(path, header, size)
     ascii_ = any(line.split()[:2] == [b"format", b"ascii"] for line in header.splitlines())
     body_lines: list[bytes] | None = None
+    stream = fh
     if ascii_:
         check_memory("text")
         fh.seek(0)
-        body = fh.read()[len(header):]
+        data = fh.read()
+        body = data[len(header):]
+        if not body.isascii():
+            at = next(i for i, b in enumerate(body) if b > 127)
+            raise MeshError(path, "the PLY body is not ASCII text (a number must be plain "
+                                  "ASCII decimals)",
+                            header_lines + len(body[:at + 1].splitlines()))
         if b"_" in body:  # Python (and so plyfile) reads '1_0' as 10; it is not a PLY number
-            line = header_lines + body[:body.index(b"_")].count(b"\n") + 1
-            raise MeshError(path, "malformed number in the PLY body (a '_' in it)", line)
+            at = body.index(b"_")
+            raise MeshError(path, "malformed number in the PLY body (a '_' in it)",
+                            header_lines + len(body[:at + 1].splitlines()))
         body_lines = body.splitlines()
+        # plyfile reads a text stream as it is (LF, CRLF or CR lines, as newline=None reads
+        # them), where it would wrap a binary one in a decoder of its own.
+        stream = io.StringIO(data.decode("ascii"), newline=None)
 
     def where(element: str, row: int | None) -> int | None:
         """Line of record ``row`` of ``element`` in an ascii file (one record a line)."""
@@ -568,20 +580,22 @@ def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
         return None
 
     ply_elements: list[tuple[str, int]] = []
-    fh.seek(0)
+    stream.seek(0)
     try:
         with warnings.catch_warnings():
-            # plyfile reads an empty ascii list through numpy.loadtxt, which warns.
+            # plyfile reads an empty ascii list through numpy.loadtxt, which warns, and an
+            # ascii 1e39 into a float32, which warns of the overflow (refused below).
             warnings.simplefilter("ignore", UserWarning)
+            warnings.simplefilter("ignore", RuntimeWarning)
             try:
                 # A triangle mesh's faces are read in one piece; other lists record by record.
-                ply = PlyData.read(fh, mmap="c", known_list_len={
+                ply = PlyData.read(stream, mmap="c", known_list_len={
                     "face": dict.fromkeys(_INDEX_NAMES, 3)})
             except PlyElementParseError as e:
                 if e.message != "unexpected list length":
                     raise
-                fh.seek(0)
-                ply = PlyData.read(fh, mmap=False)
+                stream.seek(0)
+                ply = PlyData.read(stream, mmap=False)
         consumed = None if ascii_ else fh.tell()
     except PlyHeaderParseError as e:
         line = _header_line(header, e.line)
@@ -595,12 +609,6 @@ def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
         line = where(name, e.row)
         raise MeshError(path, _element_message(e, name, body_lines, line, header_lines),
                         line) from None
-    except UnicodeDecodeError as e:  # plyfile decodes ascii bodies as ASCII
-        line = None
-        if body_lines is not None:
-            bad = next(i for i, b in enumerate(body_lines) if not b.isascii())
-            line = header_lines + bad + 1
-        raise MeshError(path, f"the PLY body is not ASCII text ({e.reason})", line) from None
     except (ValueError, MemoryError, OverflowError) as e:  # left after the header checks
         raise MeshError(path, f"cannot read the PLY file ({e})") from None
 
