@@ -1,10 +1,12 @@
 """Time reading mesh files (tracer/meshio.py): parsed, and loaded again from the cache.
 
 Writes the benchmark's torus knot (2 x segments x sides triangles, default
-144,000) as a binary PLY, an ascii PLY and an OBJ, plus a 2.9 MB OBJ of
-v/vt/vn lines (a smaller knot with a uv grid and normals), and prints for each
-the median, minimum and maximum time of ``--repeat`` parses (the cache cleared
-before each) and of loads of the same unchanged file (cache hits).
+144,000) as a binary PLY, an ascii PLY and an OBJ, plus a 2.9 MB OBJ of v and
+f lines and a 2.8 MB one of v/vt/vn lines (smaller knots, the latter with a uv
+grid and normals), and prints for each the median, minimum and maximum time of
+``--repeat`` parses (the cache cleared before each) and of loads of the same
+unchanged file (cache hits). Then the time to load a scene with the 2.9 MB
+OBJ ten times (the cache cleared first).
 
 ``--old FILE`` also times another version of the reader, a ``meshio.py``
 taken from the project's history (``git show REV:tracer/meshio.py > FILE``),
@@ -48,7 +50,10 @@ def write_files(folder: Path, segments: int, sides: int) -> list[Path]:
             "property list uchar int vertex_indices\nend_header\n")
     text.write_text(head + "".join(f"{x:.9g} {y:.9g} {z:.9g}\n" for x, y, z in v)
                     + "".join(f"3 {a} {b} {c}\n" for a, b, c in f))
-    # v/vt/vn, every corner with its own uv and normal index: 2.9 MB at 470 x 32.
+    v, f = torus_knot(880, 46)  # v and f lines: 2.9 MB
+    small = folder / "knot_2.9MB.obj"
+    write_obj(small, v, f)
+    # v/vt/vn, every corner with its own uv and normal index: 2.8 MB at 470 x 32.
     seg, sid = 470, 32
     v, f = torus_knot(seg, sid)
     uv = np.stack(np.meshgrid(np.arange(seg) / seg, np.arange(sid) / sid, indexing="ij"),
@@ -61,7 +66,40 @@ def write_files(folder: Path, segments: int, sides: int) -> list[Path]:
                    + "".join(f"vn {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in n)
                    + "".join("f " + " ".join(f"{i + 1}/{i + 1}/{i + 1}" for i in t) + "\n"
                              for t in f))
-    return [binary, text, obj, vtn]
+    return [binary, text, obj, small, vtn]
+
+
+SCENE = """
+[film]
+width = 64
+height = 48
+[camera]
+origin = [0, 2.6, 6]
+target = [0, 0.7, 0]
+fov = 40
+[materials.white]
+type = "diffuse"
+reflectance = 0.5
+[[lights]]
+type = "point"
+position = [0, 5, 5]
+intensity = 10
+[[shapes]]
+type = "mesh"
+file = "{mesh}"
+material = "white"
+"""
+
+
+def ten_scene_loads(scene: Path, repeat: int) -> list[float]:
+    from tracer import load_scene, meshio
+
+    def ten():
+        meshio.clear_cache()
+        for _ in range(10):
+            load_scene(scene)
+
+    return timed(ten, repeat)
 
 
 def timed(fn, repeat: int) -> list[float]:
@@ -120,6 +158,20 @@ def main(argv=None) -> int:
             if old is not None:
                 line += f"  identical: {same(old.load_mesh(path), mesh)}"
             print(line)
+        scene = Path(tmp) / "scene.toml"
+        scene.write_text(SCENE.format(mesh=Path(tmp) / "knot_2.9MB.obj"))
+        line = "a scene with knot_2.9MB.obj loaded ten times (cache cleared first):"
+        if old is not None:
+            # The scene model reads meshes through tracer.meshio.load_mesh, looked up at
+            # each load: the other reader stands in for it.
+            current = meshio.load_mesh
+            meshio.load_mesh = old.load_mesh
+            try:
+                line += f"  old {show(ten_scene_loads(scene, max(1, args.repeat // 2)))}"
+            finally:
+                meshio.load_mesh = current
+        line += f"  now {show(ten_scene_loads(scene, max(1, args.repeat // 2)))}"
+        print(line)
     meshio.clear_cache()
     return 0
 

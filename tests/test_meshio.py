@@ -555,6 +555,9 @@ def test_numbers_must_be_plain_ascii_decimals_in_both_formats(tmp_path, number):
                                                 ("face", FACE_PROP, FACES)])
     p.write_text(p.read_text().replace("0.5 0.5 1.0", f"0.5 {number} 1.0"), encoding="utf-8")
     check_error(p, ":15:")  # the 5th vertex
+    # Names and comments may hold anything.
+    ok = "o Cube_1 \u00e9t\u00e9\nusemtl Material_001\n# \u0663_\n" + SQUARE + "f 1 2 3\n"
+    assert len(load_mesh(write(tmp_path, "c.obj", ok)).faces) == 1
 
 
 def test_ply_ascii_values_take_their_declared_type(tmp_path):

@@ -383,6 +383,7 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
 
     text = data.decode("utf-8", errors="replace")
     lines = text.splitlines()
+    plain = text.isascii() and "_" not in text  # else each line of numbers is checked
     for lineno, raw in enumerate(lines, start=1):
         body = raw.split("#", 1)[0]  # '#' starts a comment, also after data
         parts = body.split()
@@ -392,7 +393,7 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
         if kind not in ("v", "vt", "vn", "f"):
             continue  # o, g, s, usemtl, mtllib, l, p, ...: not geometry we render
         try:
-            if not body.isascii() or "_" in body:
+            if not plain and (not body.isascii() or "_" in body):
                 # Python's float() and int() read '1_0' and non-ASCII digits; Mitsuba does not.
                 raise ValueError("numbers must be plain ASCII decimals")
             if kind == "v":
@@ -473,7 +474,9 @@ def _check_obj_table(path: Path, lines: list[str], kind: str, what: str, table: 
     the used ones), except for the finiteness every number of the file is
     checked for as it is read.
     """
-    rows = np.unique(used[used >= 0])
+    mask = np.zeros(len(table), dtype=bool)
+    mask[used[used >= 0]] = True
+    rows = np.flatnonzero(mask)
     bad = _first_bad(table[rows], normal=kind == "vn")
     if bad is None:
         return
