@@ -16,11 +16,10 @@ make of it (the tests compare the two):
   from Mitsuba's reading or refuse less than it does (negative indices taken
   from the end of the file, quads split another way, bad numbers read as 0,
   no line numbers, NumPy 2 arrays of zeros); the README says which and why.
-  OBJ indexes positions,
-  texture coordinates and normals separately; a vertex of the result is one
-  distinct (position, uv, normal) index triple, numbered in order of first
-  use, which is how Mitsuba's ``obj`` plugin builds its vertex table (a hash
-  map from the triple to a new vertex id). A position used with two different
+  OBJ indexes positions, texture coordinates and normals separately; a vertex
+  of the result is one distinct (position, uv, normal) index triple, numbered
+  in order of first use, which is how Mitsuba's ``obj`` plugin builds its
+  vertex table (a hash map from the triple to a new vertex id). A position used with two different
   normals therefore becomes two vertices, and the vertex normals computed
   later for a mesh without normals agree with Mitsuba's.
 * Polygons are split into a triangle fan (v0, v_k, v_k+1), the order
@@ -279,6 +278,7 @@ def _first_bad(a: np.ndarray, normal: bool = False) -> tuple[int, str] | None:
 
 def _show_row(a: np.ndarray, i: int) -> str:
     return "(" + ", ".join(f"{float(x):.6g}" for x in a[i]) + ")"
+
 
 # ---------------------------------------------------------------------------
 # Normals
