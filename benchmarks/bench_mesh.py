@@ -5,8 +5,8 @@ places it in a scene lit by a point light, and renders it with the tracer and
 with Mitsuba's `direct` integrator at the same size and samples per pixel.
 Prints the BVH build time, the median render times after a warm-up, and
 their ratio (the target: the tracer within 3x of Mitsuba); and the time to
-read the mesh file (tracer/meshio.py): parsed (the PLY through plyfile, and
-the same mesh written as OBJ), and loaded again (the cache's hit).
+read the mesh file (tracer/meshio.py): parsed (the PLY, and the same mesh
+written as OBJ), and loaded again (the cache's hit).
 
     python benchmarks/bench_mesh.py [--segments 1200] [--sides 60] [--size 640x480] [--spp 16]
 """

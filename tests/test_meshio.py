@@ -224,8 +224,8 @@ def test_ply_unknown_properties_and_elements_are_skipped(tmp_path, fmt):
     frows = [(7, f[0], 0.5, [1.5] * i) for i, f in enumerate(FACES)]
     other = ("material", [("ids", "list", "int", "uchar"), ("shine", "float")],
              [([1, 2], 0.5), ([], 1.0), ([3], 2.0)])
-    # Two elements of one name are refused by plyfile (their data could not be told
-    # apart by name), so the element after the faces has a name of its own.
+    # Two elements of one name are refused (their data could not be told apart by
+    # name), so the element after the faces has a name of its own.
     after = ("material_2", *other[1:])
     path = write_ply(tmp_path / "a.ply", fmt, [other, ("vertex", vprops, vrows),
                                                ("edge", [("a", "int"), ("b", "int")],
@@ -268,6 +268,163 @@ def test_ply_equals_mitsubas_reading(tmp_path, mi):
                                atol=F32_TOL)
     np.testing.assert_allclose(np.array(params["vertex_texcoords"]).reshape(-1, 2), m.uvs,
                                atol=F32_TOL)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+def test_ply_doubles_are_rounded_to_float32_as_mitsuba_stores_them(tmp_path, fmt):
+    # Mitsuba keeps positions, normals and uvs in float32 whatever the file's type; so
+    # does the mesh read here (its vertex normals are then computed from the same values).
+    props = [(c, "double") for c in ("x", "y", "z", "nx", "ny", "nz", "u", "v")]
+    rows = [(0.1 * i, 1 / 3, 0.7, 0.1, 0.2, 0.3 + i, 0.1, 2 / 3) for i in range(5)]
+    m = load_mesh(write_ply(tmp_path / "a.ply", fmt, [("vertex", props, rows),
+                                                      ("face", FACE_PROP, FACES)]))
+    f32 = np.asarray(rows, dtype=np.float32).astype(np.float64)
+    np.testing.assert_array_equal(m.vertices, f32[:, :3])
+    np.testing.assert_array_equal(m.uvs, f32[:, 6:])
+    n = f32[:, 3:6]
+    np.testing.assert_array_equal(m.normals, n / np.linalg.norm(n, axis=1, keepdims=True))
+
+
+def test_ply_double_positions_equal_mitsubas_bit_for_bit(tmp_path, mi):
+    rng = np.random.default_rng(5)
+    rows = [tuple(v) for v in rng.normal(size=(5, 3)).tolist()]
+    path = write_ply(tmp_path / "a.ply", "binary_little_endian",
+                     [("vertex", [("x", "double"), ("y", "double"), ("z", "double")], rows),
+                      ("face", FACE_PROP, FACES)])
+    params = mi.traverse(mi.load_dict({"type": "ply", "filename": str(path)}))
+    np.testing.assert_array_equal(np.array(params["vertex_positions"]).reshape(-1, 3),
+                                  load_mesh(path).vertices)
+
+
+@pytest.mark.parametrize("fmt", ["ascii", "binary_little_endian", "binary_big_endian"])
+def test_ply_polygons_with_more_lists_and_uchar_lengths_above_127_are_fans(tmp_path, fmt):
+    # Faces carrying a second list (per-corner texture coordinates, as some exporters
+    # write) and a scalar after the lists: read record by record, fanned alike.
+    polys = [[0, 1, 2, 3], [0, 1, 4], [3, 2, 4, 1, 0]]
+    props = [("flags", "ushort"), ("vertex_indices", "list", "uchar", "int"),
+             ("texcoord", "list", "int", "float"), ("quality", "double")]
+    rows = [(7, p, [0.5] * 2 * len(p), 1.5) for p in polys]
+    m = load_mesh(write_ply(tmp_path / "a.ply", fmt, [("vertex", XYZ, VERTS),
+                                                      ("face", props, rows)]))
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3], [0, 1, 4], [3, 2, 4],
+                                            [3, 4, 1], [3, 1, 0]])
+    # Vertices whose positions, normals and uvs follow a list of varying length.
+    vprops = [("tags", "list", "uchar", "short"), *XYZ, ("nx", "float"), ("ny", "float"),
+              ("nz", "double"), ("u", "float"), ("v", "float")]
+    vrows = [([1, 2, 3][:i % 4], *v, 0.0, 0.6, 0.8, 0.25 * i, 0.5) for i, v in enumerate(VERTS)]
+    m = load_mesh(write_ply(tmp_path / "v.ply", fmt, [("vertex", vprops, vrows),
+                                                      ("face", FACE_PROP, FACES)]))
+    np.testing.assert_array_equal(m.vertices, VERTS)
+    np.testing.assert_allclose(m.normals, np.tile([0, 0.6, 0.8], (5, 1)), atol=1e-7)
+    np.testing.assert_array_equal(m.uvs, [[0.25 * i, 0.5] for i in range(5)])
+    # A 130-gon: its length, 130, is a uchar above 127 (negative if read as a char).
+    ring = [(math.cos(k / 20.7), math.sin(k / 20.7), 0.0) for k in range(130)]
+    m = load_mesh(write_ply(tmp_path / "b.ply", fmt, [("vertex", XYZ, ring),
+                                                      ("face", FACE_PROP, [(list(range(130)),)])]))
+    np.testing.assert_array_equal(m.faces, [[0, k, k + 1] for k in range(1, 129)])
+
+
+def test_ply_binary_polygons_cut_short_are_refused_naming_the_record(tmp_path):
+    polys = [([0, 1, 2, 3],), ([0, 1, 4],), ([3, 2, 4, 1, 0],)]
+    p = write_ply(tmp_path / "a.ply", "binary_little_endian",
+                  [("vertex", XYZ, VERTS), ("face", [("vertex_index", "list", "int", "uint")],
+                                            polys)])
+    (tmp_path / "cut.ply").write_bytes(p.read_bytes()[:-3])
+    check_error(tmp_path / "cut.ply", "ends inside element 'face'", "after 2 of 3 records")
+    # Cut inside the last record's length (2 of its 4 bytes left).
+    (tmp_path / "mid.ply").write_bytes(p.read_bytes()[:-(4 * 5 + 2)])
+    check_error(tmp_path / "mid.ply", "ends inside element 'face'", "after 2 of 3 records")
+    # A list length larger than the file: refused the same way, not allocated.
+    data = bytearray(p.read_bytes())
+    at = data.index(b"end_header\n") + len(b"end_header\n") + 5 * 12
+    data[at:at + 4] = struct.pack("<i", 10**9)
+    (tmp_path / "long.ply").write_bytes(bytes(data))
+    check_error(tmp_path / "long.ply", "ends inside element 'face'", "after 0 of 3 records")
+
+
+@pytest.mark.parametrize("edit,words", [
+    (("3 0 1 2\n", "3 0 1 2 7\n"), (":16:", "more numbers on the line")),
+    (("3 0 1 2\n", "3 0 1\n"), (":16:", "line ends early")),
+    (("3 0 1 2\n", "4 0 1 2\n"), (":16:", "line ends early")),
+    (("0.5 0.5 1.0\n", "0.5 0.5\n"), (":15:", "line ends early")),
+    (("3 0 1 2\n", "2.5 0 1 2\n"), (":16:", "expected an integer", "'2.5'")),
+    (("3 0 1 2\n", "3 0 1e0 2\n"), (":16:", "expected an integer", "'1e0'")),
+    (("3 0 1 2\n", "3.0 0 1 2\n"), (":16:", "expected an integer", "'3.0'")),
+    (("3 0 1 2\n", "3 0 1 4294967296\n"), (":16:", "does not fit", "'int'")),
+    (("3 0 1 2\n", "-3 0 1 2\n"), (":16:", "does not fit", "'uchar'")),
+    (("3 0 1 2\n", "3 0 1 2 # a comment\n"), (":16:", "expected an integer", "'#'")),
+])
+def test_ply_ascii_records_are_one_line_of_numbers_of_their_declared_types(tmp_path, edit,
+                                                                            words):
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                ("face", FACE_PROP, FACES)])
+    text = p.read_text()
+    assert edit[0] in text
+    p.write_text(text.replace(edit[0], edit[1], 1))
+    check_error(p, *words)
+
+
+def test_ply_ascii_line_of_the_wrong_length_is_refused_as_such(tmp_path):
+    # One number too many shifts what follows the list: the line's length is the problem,
+    # not the 0.5 that now falls among the indices.
+    props = [("vertex_indices", "list", "uchar", "int"), ("quality", "float")]
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                ("face", props, [(f[0], 0.5) for f in FACES])])
+    p.write_text(p.read_text().replace("3 0 1 2 0.5\n", "3 0 1 2 0.5 9\n"))
+    check_error(p, ":17:", "more numbers on the line than the header declares")
+    # A negative length of a signed type is a number of that type, but no list's length.
+    p = write_ply(tmp_path / "b.ply", "ascii", [
+        ("vertex", XYZ, VERTS), ("face", [("vertex_indices", "list", "char", "int")], FACES)])
+    p.write_text(p.read_text().replace("3 0 1 2\n", "-3 0 1 2\n"))
+    check_error(p, ":16:", "negative length -3")
+
+
+def test_ply_ascii_blank_lines_and_signs_are_read_as_mitsuba_reads_them(tmp_path):
+    # Mitsuba reads an ascii body number by number: blank lines and a '+' change nothing.
+    p = write_ply(tmp_path / "a.ply", "ascii", [("vertex", XYZ, VERTS),
+                                                ("face", FACE_PROP, FACES)])
+    p.write_text(p.read_text().replace("3 0 1 2\n", "\n  \n+3 +0 1 2\n"))
+    m = load_mesh(p)
+    np.testing.assert_array_equal(m.faces, [[0, 1, 2], [0, 2, 3], [0, 1, 4]])
+    p.write_text(p.read_text().replace("3 0 1 4", "oops"))
+    check_error(p, ":20:", "expected an integer", "'oops'")  # line numbers count blank lines
+
+
+@pytest.mark.parametrize("edit,words", [
+    (("format binary_little_endian 1.0", "format binary_little_endian 2.0"), (":2:", "1.0")),
+    (("comment written by the tests", "colour red"), (":3:", "unknown keyword 'colour'")),
+    (("comment written by the tests", "property float w"), (":3:", "before any element")),
+    (("comment written by the tests", "format ascii 1.0"), (":3:", "second 'format'")),
+    (("property float z", "property float z extra"), (":7:", "expected 'property")),
+    (("property list uchar int", "property list uchar"), (":9:", "expected 'property list")),
+    (("property list uchar int", "property list float int"), (":9:", "integer type")),
+    (("property float y", "property float x"), (":6:", "two properties of the same name")),
+    (("end_header\n", "end_header now\n"), ("'end_header' line",)),
+    (("ply\n", "ply 1\n"), (":1:", "'ply' alone")),
+])
+def test_ply_header_lines_follow_the_format_to_the_letter(tmp_path, edit, words):
+    p = write_ply(tmp_path / "a.ply", "binary_little_endian", [("vertex", XYZ, VERTS),
+                                                               ("face", FACE_PROP, FACES)])
+    data = p.read_bytes()
+    assert edit[0].encode() in data
+    p.write_bytes(data.replace(edit[0].encode(), edit[1].encode(), 1))
+    check_error(p, *words)
+
+
+@pytest.mark.parametrize("newline", [b"\r", b"\r\n", b"\n"])
+def test_ply_header_end_is_a_line_of_its_own_and_the_body_starts_right_after(tmp_path,
+                                                                             newline):
+    # 'end_header' in a comment does not end the header; a binary body whose first byte
+    # is a line feed keeps it after a header of CR lines (the x of vertex 0 here).
+    x0 = struct.unpack("<f", b"\n\x00\x00\x00")[0]  # 1.4e-44, a float32 subnormal
+    verts = [(x0, 0.0, 0.0)] + VERTS[1:]
+    p = write_ply(tmp_path / "a.ply", "binary_little_endian", [("vertex", XYZ, verts),
+                                                               ("face", FACE_PROP, FACES)])
+    head, body = p.read_bytes().split(b"end_header\n", 1)
+    head = head.replace(b"comment written by the tests", b"comment the last line: end_header")
+    p.write_bytes(head.replace(b"\n", newline) + b"end_header" + newline + body)
+    m = load_mesh(p)
+    np.testing.assert_array_equal(m.vertices, np.float32(verts).astype(np.float64))
 
 
 # --------------------------------------------------------------------------- errors

@@ -4,13 +4,18 @@ A mesh means the same surface to the tracer and to the reference: what this
 module makes of a file is what Mitsuba 3.9.1's ``obj`` and ``ply`` plugins
 make of it (the tests compare the two):
 
-* PLY files are parsed by `plyfile <https://github.com/dranjan/python-plyfile>`_
-  (ascii, binary little and big endian, every PLY scalar type, lists of any
-  integer length type; its header grammar and its errors with line, element,
-  record and property); this module only maps its elements to a mesh. A
-  triangle mesh (every face a 3-list, the only kind Mitsuba's ``ply`` plugin
-  reads) is read in one piece through a memory map; polygon faces, which only
-  the tracer reads, through plyfile's record-by-record path.
+* PLY files are parsed here, after Turk's description of the format: the
+  header to the letter (one ``format`` line of version 1.0, ``element`` and
+  ``property`` lines of known types, list lengths of integer types), then the
+  body, ascii (one record a line, each number of its declared type: integers
+  plain decimal integers in range, ``float`` values rounded to float32) or
+  binary of either byte order, with lists of any integer length type. The
+  permissively licensed PLY readers on PyPI that were measured (meshio,
+  trimesh, pyvista-miniply, VTK, Open3D, point-cloud-utils, pyntcloud) each
+  misread valid files or accept broken ones, even behind a wrapper, and
+  plyfile is GPL-licensed; the README says which case each gets wrong.
+  Triangle and quad meshes are read in one piece; mixed polygons record by
+  record for their list lengths, then in one piece.
 * OBJ files are parsed here: the OBJ readers on PyPI that were measured
   (tinyobjloader, trimesh, pywavefront, openmesh, meshio, libigl) each differ
   from Mitsuba's reading or refuse less than it does (negative indices taken
@@ -27,7 +32,9 @@ make of it (the tests compare the two):
 * Texture coordinates: Mitsuba flips v (v -> 1 - v) for OBJ files by default
   (``flip_tex_coords = true``, for consistency with Mitsuba 0.x and 1) and not
   for PLY files; :func:`load_mesh` does the same unless told otherwise.
-* Normals read from a file are normalised, as Mitsuba does.
+* Normals read from a file are normalised, as Mitsuba does. PLY positions,
+  normals and uvs are rounded to float32 (a ``double`` too), as Mitsuba
+  stores them.
 * Vertex normals of a mesh without them are angle-weighted averages of the
   face normals (:func:`compute_vertex_normals`), Mitsuba's
   ``Mesh::recompute_vertex_normals``.
@@ -56,13 +63,12 @@ File Format" (1994).
 
 from __future__ import annotations
 
-import io
 import math
 import os
 import re
 import stat
+import struct
 import sys
-import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -79,9 +85,10 @@ FLOAT32_MAX = float(np.finfo(np.float32).max)
 
 #: Bytes of memory reading a mesh may take per byte of its file, as upper bounds for the
 #: WHITTED_MAX_MEMORY check made before reading: text (OBJ, ascii PLY) and binary PLY.
-#: Peaks measured with tracemalloc on 2.4-5 MB files: OBJ of v and f lines 23x its size,
-#: of v/vt/vn lines 15x, ascii PLY 19x; binary PLY of triangles 3.3x, of mixed polygons
-#: (read record by record) 16x. The bounds leave a margin of about 1.4 over the largest.
+#: Peaks measured with tracemalloc on 2.4-6.3 MB files: OBJ of v and f lines 23x its size,
+#: of v/vt/vn lines 15x, ascii PLY 16x (triangles; mixed triangles and quads 14x); binary
+#: PLY of triangles 4.2x, of mixed triangles and quads (their list lengths found record by
+#: record) 9.6x. The bounds leave a margin of about 1.4 over the largest.
 MEMORY_PER_FILE_BYTE = {"text": 32, "binary": 24}
 
 #: The cache's bounds: at most this many meshes, and this many bytes of arrays in all.
@@ -520,237 +527,590 @@ def _obj_index(token: str, count: int, what: str) -> int:
 
 
 # ---------------------------------------------------------------------------
-# PLY (through plyfile)
+# PLY
 # ---------------------------------------------------------------------------
 
+#: PLY's scalar types (Turk's names and the sized aliases), and the unofficial 64-bit and
+#: half types Mitsuba's ply plugin also reads, as NumPy type codes (byte order added later).
+_PLY_TYPES = {
+    "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
+    "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
+    "int": "i4", "int32": "i4", "uint": "u4", "uint32": "u4",
+    "long": "i8", "int64": "i8", "ulong": "u8", "uint64": "u8",
+    "half": "f2", "float16": "f2",
+    "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
+}
+_PLY_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
 #: Names of the face element's index list, and of the texture coordinates in the order
 #: of preference of Mitsuba's ply plugin.
 _INDEX_NAMES = ("vertex_indices", "vertex_index")
 _UV_NAMES = (("u", "v"), ("texture_u", "texture_v"), ("s", "t"))
-#: A header longer than this is read whole only if needed (comments can be long).
-_HEADER_CHUNK = 1 << 16
+#: Elements whose data makes the mesh; the others are read (ascii: checked) and dropped.
+_KEPT = ("vertex", "face")
+#: A token of an integer-typed ascii property: optional sign, decimal digits.
+_NOT_INTEGER = re.compile(rb"[^0-9+\-\s]")
+
+
+@dataclass
+class _Prop:
+    name: str
+    type: str               # the PLY type of the value (of the items, for a list)
+    count_type: str | None  # the PLY type of a list's length; None for a scalar
+
+    @property
+    def integer(self) -> bool:
+        return _PLY_TYPES[self.type][0] in "iu"
+
+
+@dataclass
+class _Element:
+    name: str
+    count: int
+    props: list[_Prop]
+
+
+#: What is read of one element: per property, a column of values (a scalar) or the
+#: (counts, flat items) of its lists; and, for an ascii file, the line of each record.
+_Columns = dict[str, "np.ndarray | tuple[np.ndarray, np.ndarray]"]
 
 
 def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
-    """Parse an ascii or binary PLY file with plyfile; elements other than vertex and face
-    are read and dropped."""
-    from plyfile import PlyData, PlyElementParseError, PlyHeaderParseError
-
+    """Parse an ascii or binary PLY file (Turk's format): its header to the letter, then
+    the body, every element in turn; elements other than vertex and face are dropped."""
     fh.seek(0)
-    head = fh.read(_HEADER_CHUNK)
-    end = head.find(b"end_header")
-    if end < 0 and len(head) == _HEADER_CHUNK:
-        head += fh.read()
-        end = head.find(b"end_header")
-    if end < 0:
-        raise MeshError(path, "PLY header has no 'end_header'")
-    end += len(b"end_header")
-    end += 2 if head[end:end + 2] == b"\r\n" else 1 if head[end:end + 1] in (b"\n", b"\r") else 0
-    header = head[:end]  # with its last newline: LF, CRLF or CR, as plyfile reads them
-    header_lines = len(header.splitlines())
-    _check_ply_header(path, header, size)
-    ascii_ = any(line.split()[:2] == [b"format", b"ascii"] for line in header.splitlines())
-    body_lines: list[bytes] | None = None
-    stream = fh
-    if ascii_:
+    data = fh.read(size)  # a sized read: several times faster than reading to the end
+    fmt, elements, body, header_lines = _parse_ply_header(path, data, size)
+    if fmt == "ascii":
         check_memory("text")
-        fh.seek(0)
-        data = fh.read()
-        body = data[len(header):]
+        reader = _PlyAscii(path, data[body:], header_lines)
+    else:
+        reader = _PlyBinary(path, data, body, _PLY_FORMATS[fmt])
+    kept: dict[str, _Columns] = {}
+    lines: dict[str, np.ndarray | None] = {}
+    for el in elements:
+        cols, rec_lines = reader.element(el, keep=el.name in _KEPT)
+        if el.name in _KEPT:
+            kept[el.name], lines[el.name] = cols, rec_lines
+    reader.finish()
+    elements_by_name = {el.name: el for el in elements}
+
+    def where(element: str, row: int | None) -> int | None:
+        """Line of record ``row`` of ``element`` in an ascii file."""
+        rec = lines.get(element)
+        return None if rec is None or row is None else int(rec[row])
+
+    return _ply_mesh(path, kept, elements_by_name, flip, where)
+
+
+def _parse_ply_header(path: Path, data: bytes, size: int
+                      ) -> tuple[str, list[_Element], int, int]:
+    """(format, elements, offset of the body, number of header lines) of a PLY file.
+
+    Lines end in LF, CRLF or CR (the first line's ending is the file's); the
+    grammar is Turk's: ``ply``, one ``format <ascii|binary_little_endian|
+    binary_big_endian> 1.0``, then ``element <name> <count>`` lines each
+    followed by its ``property <type> <name>`` and ``property list
+    <length type> <item type> <name>`` lines, ``comment`` and ``obj_info``
+    lines anywhere, and ``end_header``.
+    """
+    found = re.search(rb"(?:\A|[\r\n])end_header[ \t]*(\r\n|\r|\n|\Z)", data)
+    if found is None:
+        raise MeshError(path, "PLY header has no 'end_header' line")
+    end, body = found.start(1), found.end(1)
+    if found.group(1) == b"\r\n" and data[3:5] != b"\r\n":
+        body -= 1  # lines end in CR: the LF is the body's first byte
+    header = data[:end]
+    lines = header.splitlines()
+    if not header.isascii():
+        at = next(i for i, b in enumerate(header) if b > 127)
+        n = len(header[:at + 1].splitlines())
+        text = lines[n - 1].decode("utf-8", errors="replace").strip()
+        raise MeshError(path, f"PLY header line is not ASCII text: {text[:60]!r}", n)
+    fmt = None
+    elements: list[_Element] = []
+    for lineno, raw in enumerate(lines, start=1):
+        tok = raw.decode("ascii").split()
+        text = raw.decode("ascii").strip()[:60]
+
+        def bad(why: str, lineno: int = lineno, text: str = text) -> MeshError:
+            return MeshError(path, f"malformed PLY header line ({why}): {text!r}", lineno)
+
+        if lineno == 1:
+            if tok != ["ply"]:
+                raise bad("the first line must be 'ply' alone")
+            continue
+        if not tok or tok[0] in ("comment", "obj_info"):
+            continue
+        key = tok[0]
+        if key == "end_header":
+            if len(tok) != 1 or lineno != len(lines):
+                raise bad("'end_header' stands alone on the last header line")
+        elif key == "format":
+            if fmt is not None:
+                raise bad("a second 'format' line")
+            if elements:
+                raise bad("'format' must come before the elements")
+            if len(tok) != 3 or tok[1] not in _PLY_FORMATS:
+                raise bad("expected 'format ascii|binary_little_endian|binary_big_endian 1.0'")
+            if tok[2] != "1.0":
+                raise bad(f"PLY version {tok[2]!r}, only '1.0' exists")
+            fmt = tok[1]
+        elif key == "element":
+            if len(tok) != 3:
+                raise bad("expected 'element <name> <count>'")
+            if not re.fullmatch(r"[0-9]+", tok[2]):
+                raise bad(f"element count {tok[2]!r} is not a decimal integer")
+            if any(el.name == tok[1] for el in elements):
+                raise bad(f"two elements of the same name '{tok[1]}'")
+            count = int(tok[2])
+            if count > size:  # every record takes at least one byte
+                raise MeshError(path, f"PLY header declares {count:,} '{tok[1]}' records, "
+                                      f"more than a {size:,}-byte file can hold", lineno)
+            elements.append(_Element(tok[1], count, []))
+        elif key == "property":
+            if not elements:
+                raise bad("a property before any element")
+            if len(tok) >= 2 and tok[1] == "list":
+                if len(tok) != 5:
+                    raise bad("expected 'property list <length type> <item type> <name>'")
+                types, name = tok[2:4], tok[4]
+            elif len(tok) == 3:
+                types, name = tok[1:2], tok[2]
+            else:
+                raise bad("expected 'property <type> <name>'")
+            for t in types:
+                if t not in _PLY_TYPES:
+                    raise bad(f"unknown PLY type {t!r}")
+            if len(types) == 2 and _PLY_TYPES[types[0]][0] not in "iu":
+                raise bad(f"a list's length must be of an integer type, not {types[0]!r}")
+            if any(p.name == name for p in elements[-1].props):
+                raise bad(f"two properties of the same name '{name}'")
+            elements[-1].props.append(_Prop(name, types[-1],
+                                            types[0] if len(types) == 2 else None))
+        else:
+            raise bad(f"unknown keyword {key!r}")
+        if key != "format" and fmt is None:
+            raise bad("the 'format' line must come first, after 'ply'")
+    if fmt is None:
+        raise MeshError(path, "PLY header has no 'format' line")
+    return fmt, elements, body, len(lines)
+
+
+def _record_layout(el: _Element) -> tuple[list[_Prop], int | None]:
+    """(the list properties, the position of the only list among the properties or None)."""
+    lists = [p for p in el.props if p.count_type]
+    only = el.props.index(lists[0]) if len(lists) == 1 else None
+    return lists, only
+
+
+class _PlyBinary:
+    """Reads the elements of a binary PLY body one after the other.
+
+    Records of fixed size, and records whose lists all have the length of
+    the first record's (triangle or quad meshes), are read in one piece;
+    others (mixed polygons) record by record for their list lengths, then
+    gathered in one piece.
+    """
+
+    def __init__(self, path: Path, data: bytes, offset: int, order: str):
+        self.path, self.data, self.offset, self.order = path, data, offset, order
+        self.buf = np.frombuffer(data, dtype=np.uint8)
+
+    def _dtype(self, t: str) -> np.dtype:
+        return np.dtype(self.order + _PLY_TYPES[t])
+
+    def _ends(self, el: _Element, row: int) -> MeshError:
+        return MeshError(self.path, f"PLY file ends inside element '{el.name}' (after "
+                                    f"{row:,} of {el.count:,} records)")
+
+    def element(self, el: _Element, keep: bool) -> tuple[_Columns, None]:
+        lists, _ = _record_layout(el)
+        if not lists or el.count == 0:
+            return self._fixed(el, [None] * len(el.props), keep), None
+        first = self._first_lengths(el)
+        if first is not None:
+            cols = self._fixed(el, first, keep, check=True)
+            if cols is not None:
+                return cols, None
+        return self._walk(el, keep), None
+
+    def _first_lengths(self, el: _Element) -> list[int | None] | None:
+        """Lengths of the first record's lists (None for scalars), or None if it is cut."""
+        off, out = self.offset, []
+        for p in el.props:
+            if p.count_type:
+                dt = self._dtype(p.count_type)
+                if off + dt.itemsize > len(self.data):
+                    return None
+                n = int(np.frombuffer(self.data, dt, 1, off)[0])
+                if n < 0:
+                    return None
+                out.append(n)
+                off += dt.itemsize + n * self._dtype(p.type).itemsize
+            else:
+                out.append(None)
+                off += self._dtype(p.type).itemsize
+        return out
+
+    def _fixed(self, el: _Element, lengths: list[int | None], keep: bool,
+               check: bool = False) -> _Columns | None:
+        """Every record laid out alike (lists of the given lengths): one structured read.
+        With ``check``, None when some list's length differs (or the body is too short
+        to tell)."""
+        fields, itemsize = [], 0
+        for i, (p, n) in enumerate(zip(el.props, lengths, strict=True)):
+            if n is None:
+                fields.append((f"p{i}", self._dtype(p.type)))
+                itemsize += self._dtype(p.type).itemsize
+            else:
+                fields.append((f"c{i}", self._dtype(p.count_type)))
+                itemsize += self._dtype(p.count_type).itemsize + n * self._dtype(p.type).itemsize
+                if n:
+                    fields.append((f"p{i}", self._dtype(p.type), (n,)))
+        left = len(self.data) - self.offset
+        if itemsize == 0:  # an element without properties holds no bytes
+            return {}
+        if itemsize * el.count > left:
+            if check:
+                return None
+            raise self._ends(el, left // itemsize)
+        rec = np.frombuffer(self.data, np.dtype(fields), el.count, self.offset)
+        for i, n in enumerate(lengths):
+            if n is not None and np.any(rec[f"c{i}"] != n):
+                return None
+        self.offset += itemsize * el.count
+        if not keep:
+            return {}
+        out: _Columns = {}
+        for i, (p, n) in enumerate(zip(el.props, lengths, strict=True)):
+            if n is None:
+                out[p.name] = rec[f"p{i}"]
+            else:
+                flat = (rec[f"p{i}"].reshape(-1) if n else np.zeros(0, self._dtype(p.type)))
+                out[p.name] = (np.full(el.count, n, dtype=np.int64), flat)
+        return out
+
+    def _walk(self, el: _Element, keep: bool) -> _Columns:
+        """Records with lists of varying lengths: the offsets found record by record (the
+        lengths decide where the next value is), the values then gathered at once."""
+        data, n_bytes = self.data, len(self.data)
+        # The record as runs: bytes of scalars, then a list (length unpacker, sizes), ...
+        steps: list[tuple[int, object, int, int]] = []
+        fixed = 0
+        for p in el.props:
+            if p.count_type:
+                cdt = self._dtype(p.count_type)
+                steps.append((fixed, struct.Struct(self.order + cdt.char).unpack_from,
+                              cdt.itemsize, self._dtype(p.type).itemsize))
+                fixed = 0
+            else:
+                fixed += self._dtype(p.type).itemsize
+        tail = fixed
+        k = len(steps)
+        starts = np.empty((el.count, k), dtype=np.int64)  # offset of each list's length
+        lengths = np.empty((el.count, k), dtype=np.int64)
+        off = self.offset
+        for r in range(el.count):
+            for j, (before, unpack, csize, isize) in enumerate(steps):
+                off += before
+                if off + csize > n_bytes:
+                    raise self._ends(el, r)
+                n = unpack(data, off)[0]
+                if n < 0:
+                    raise MeshError(self.path, f"PLY element '{el.name}', record {r}: a list "
+                                               f"of negative length {n}")
+                starts[r, j], lengths[r, j] = off, n
+                off += csize + n * isize
+            off += tail
+            if off > n_bytes:
+                raise self._ends(el, r)
+        record_start = starts[:, 0] - steps[0][0]
+        self.offset = off
+        if not keep:
+            return {}
+        out: _Columns = {}
+        at = record_start  # offset of the current property in each record
+        j = 0
+        for p in el.props:
+            dt = self._dtype(p.type)
+            if p.count_type:
+                _, _, csize, isize = steps[j]
+                n = lengths[:, j]
+                first = starts[:, j] + csize
+                total = int(n.sum())
+                item = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
+                out[p.name] = (n, self._gather(np.repeat(first, n) + item * isize, dt))
+                at = first + n * isize
+                j += 1
+            else:
+                out[p.name] = self._gather(at, dt)
+                at = at + dt.itemsize
+        return out
+
+    def _gather(self, offsets: np.ndarray, dt: np.dtype) -> np.ndarray:
+        """The values of type ``dt`` at these byte offsets of the file."""
+        idx = offsets[:, None] + np.arange(dt.itemsize)
+        return self.buf[idx].reshape(-1).view(dt)
+
+    def finish(self) -> None:
+        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
+        tail = self.data[self.offset:self.offset + 4097]
+        if len(tail) > 4096 or tail.strip(b"\r\n\x00 "):
+            raise MeshError(self.path, "PLY file has data after its last element")
+
+
+class _PlyAscii:
+    """Reads the elements of an ascii PLY body: one record a line (blank lines skipped),
+    each number of the type the header declares for it."""
+
+    def __init__(self, path: Path, body: bytes, header_lines: int):
+        self.path, self.header_lines = path, header_lines
         if not body.isascii():
             at = next(i for i, b in enumerate(body) if b > 127)
             raise MeshError(path, "the PLY body is not ASCII text (a number must be plain "
-                                  "ASCII decimals)",
-                            header_lines + len(body[:at + 1].splitlines()))
-        if b"_" in body:  # Python (and so plyfile) reads '1_0' as 10; it is not a PLY number
+                                  "ASCII decimals)", header_lines + len(body[:at + 1].splitlines()))
+        if b"_" in body:  # Python reads '1_0' as 10; it is not a PLY number
             at = body.index(b"_")
             raise MeshError(path, "malformed number in the PLY body (a '_' in it)",
                             header_lines + len(body[:at + 1].splitlines()))
-        body_lines = body.splitlines()
-        # plyfile reads a text stream as it is (LF, CRLF or CR lines, as newline=None reads
-        # them), where it would wrap a binary one in a decoder of its own.
-        stream = io.StringIO(data.decode("ascii"), newline=None)
+        # One pass over the bytes: where each token starts, on which line, so that the
+        # records (non-blank lines) and their widths are known before any number is read.
+        body = body.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+        self.body = body
+        self.tokens = body.split()
+        c = np.frombuffer(body, dtype=np.uint8)
+        space = (c == 32) | ((c >= 9) & (c <= 12))  # what bytes.split() splits at
+        first = ~space
+        first[1:] &= space[:-1]
+        newlines = np.flatnonzero(c == 10)
+        line = np.searchsorted(newlines, np.flatnonzero(first), side="right")
+        widths = np.bincount(line, minlength=len(newlines) + 1)
+        self.records = np.flatnonzero(widths)  # the body lines that hold a record
+        self.widths = widths[self.records]
+        self.first_token = np.concatenate(([0], np.cumsum(self.widths)))
+        self.line_start = np.concatenate(([0], newlines + 1))  # byte offset of each line
+        self.next = 0  # the next record (index into self.records)
 
-    def where(element: str, row: int | None) -> int | None:
-        """Line of record ``row`` of ``element`` in an ascii file (one record a line)."""
-        if body_lines is None or row is None:
-            return None
-        before = 0
-        for el in ply_elements:
-            if el[0] == element:
-                return header_lines + before + row + 1
-            before += el[1]
-        return None
+    def element(self, el: _Element, keep: bool) -> tuple[_Columns, np.ndarray]:
+        a, b = self.next, self.next + el.count
+        if b > len(self.records):
+            raise MeshError(self.path, f"PLY file ends inside element '{el.name}' (after "
+                                       f"{len(self.records) - a:,} of {el.count:,} records)")
+        self.next = b
+        rows = self.records[a:b]
+        lines = self.header_lines + rows + 1  # 1-based line of each record
+        widths = self.widths[a:b]
+        tokens = self.tokens[self.first_token[a]:self.first_token[b]]
+        span = ((int(self.line_start[rows[0]]), int(self.line_start[rows[-1] + 1])
+                 if rows[-1] + 1 < len(self.line_start) else len(self.body))
+                if len(rows) else (0, 0))
+        starts = self.first_token[a:b] - self.first_token[a]  # each record's first token
+        record = np.repeat(np.arange(el.count), widths)  # record of each token
+        prop, is_count, lengths = self._layout(el, tokens, widths, starts, record, lines)
+        values = self._numbers(el, tokens, span, record, prop, is_count, lengths, lines)
+        if not keep:
+            return {}, lines
+        cols: _Columns = {}
+        for i, p in enumerate(el.props):
+            if p.count_type:
+                cols[p.name] = (lengths[p.name], values[(prop == i) & ~is_count])
+            else:
+                cols[p.name] = values[prop == i]
+        return cols, lines
 
-    ply_elements: list[tuple[str, int]] = []
-    stream.seek(0)
-    try:
-        with warnings.catch_warnings():
-            # plyfile reads an empty ascii list through numpy.loadtxt, which warns, and an
-            # ascii 1e39 into a float32, which warns of the overflow (refused below).
-            warnings.simplefilter("ignore", UserWarning)
-            warnings.simplefilter("ignore", RuntimeWarning)
-            try:
-                # A triangle mesh's faces are read in one piece; other lists record by record.
-                ply = PlyData.read(stream, mmap="c", known_list_len={
-                    "face": dict.fromkeys(_INDEX_NAMES, 3)})
-            except PlyElementParseError as e:
-                if e.message != "unexpected list length":
-                    raise
-                stream.seek(0)
-                ply = PlyData.read(stream, mmap=False)
-        consumed = None if ascii_ else fh.tell()
-    except PlyHeaderParseError as e:
-        line = _header_line(header, e.line)
-        msg = e.message
-        if msg.startswith("field type"):  # "field type 'floot' not in [every type]"
-            msg = "unknown PLY type " + msg.split()[2]
-        raise MeshError(path, f"malformed PLY header line ({msg}): {line!r}", e.line) from None
-    except PlyElementParseError as e:
-        ply_elements = _declared_elements(header)
-        name = e.element.name if e.element is not None else "?"
-        line = where(name, e.row)
-        raise MeshError(path, _element_message(e, name, body_lines, line, header_lines),
-                        line) from None
-    except (ValueError, MemoryError, OverflowError) as e:  # left after the header checks
-        raise MeshError(path, f"cannot read the PLY file ({e})") from None
+    def _fail(self, el: _Element, r: int, message: str, lines: np.ndarray) -> MeshError:
+        return MeshError(self.path, f"element '{el.name}', record {r}: {message}",
+                         int(lines[r]))
 
-    ply_elements = [(el.name, el.count) for el in ply.elements]
-    if ascii_:
-        records = sum(n for _, n in ply_elements)
-        rest = body_lines[records:]
-        extra = next((i for i, b in enumerate(rest) if b.strip()), None)
-        if extra is not None:
-            raise MeshError(path, "PLY file has data after its last element",
-                            header_lines + records + extra + 1)
-    elif consumed is not None and consumed < size:
-        fh.seek(consumed)
-        tail = fh.read(min(size - consumed, 4096))
-        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
-        if size - consumed > 4096 or tail.strip(b"\r\n\x00 "):
-            raise MeshError(path, "PLY file has data after its last element")
-    return _ply_mesh(path, ply, flip, where)
+    def _layout(self, el, tokens, widths, starts, record, lines):
+        """(property of each token, whether it is a list's length, each list property's
+        lengths): from the line widths alone when a record has at most one list (its
+        length is what the line holds beyond the scalars), record by record otherwise."""
+        lists, only = _record_layout(el)
+        scalars = len(el.props) - len(lists)
+        short = "the line ends early (a PLY record is one line)"
+        extra = "more numbers on the line than the header declares"
+        j = np.arange(len(tokens)) - starts[record]  # position of each token in its record
+        if not lists:
+            bad = widths != scalars
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise self._fail(el, r, short if widths[r] < scalars else extra, lines)
+            return j, np.zeros(len(tokens), dtype=bool), {}
+        if only is not None:
+            if (widths < scalars + 1).any():
+                raise self._fail(el, int(np.argmax(widths < scalars + 1)), short, lines)
+            n = widths - scalars - 1  # checked against the lengths written, once read
+            nr = n[record]
+            prop = np.where(j <= only, j, np.where(j <= only + nr, only, j - nr))
+            return prop, j == only, {lists[0].name: n}
+        # Several lists a record: walk each record.
+        prop = np.empty(len(tokens), dtype=np.int64)
+        is_count = np.zeros(len(tokens), dtype=bool)
+        lengths: dict[str, list[int]] = {p.name: [] for p in lists}
+        for r in range(el.count):
+            k, end = int(starts[r]), int(starts[r] + widths[r])
+            for i, p in enumerate(el.props):
+                if k >= end:
+                    raise self._fail(el, r, short, lines)
+                prop[k] = i
+                if p.count_type:
+                    is_count[k] = True
+                    try:
+                        n = int(tokens[k])
+                    except ValueError:
+                        n = 0  # not an integer: refused with the numbers below
+                    if n < 0 or k + 1 + n > end:
+                        raise self._fail(el, r, short if n >= 0 else
+                                         f"a list of negative length {n}", lines)
+                    prop[k + 1:k + 1 + n] = i
+                    lengths[p.name].append(n)
+                    k += 1 + n
+                else:
+                    k += 1
+            if k != end:
+                raise self._fail(el, r, extra, lines)
+        return prop, is_count, {name: np.asarray(v, dtype=np.int64)
+                                for name, v in lengths.items()}
 
+    def _numbers(self, el, tokens, span, record, prop, is_count, lengths, lines
+                 ) -> np.ndarray:
+        """The tokens as numbers of their declared types (float64 holding them): integers
+        plain decimal integers in their type's range, floats rounded to their type. The
+        first bad token is refused naming its record, property and line; a list whose
+        written length is not what its line holds, naming its record and line."""
+        type_of = {}  # (property, is a length) -> PLY type
+        for i, p in enumerate(el.props):
+            type_of[i, False] = p.type
+            if p.count_type:
+                type_of[i, True] = p.count_type
+        codes = sorted(set(type_of.values()))
+        code = np.zeros(len(tokens), dtype=np.int64)  # index into codes of each token
+        for (i, count), t in type_of.items():
+            code[(prop == i) & (is_count == count)] = codes.index(t)
+        integer = np.array([_PLY_TYPES[t][0] in "iu" for t in codes])[code] if len(tokens) \
+            else np.zeros(0, dtype=bool)
 
-def _check_ply_header(path: Path, header: bytes, size: int) -> None:
-    """What plyfile lets through: non-ASCII bytes, and element counts that are not plain
-    decimal integers (``5_0``, ``-5``, a superscript digit) or that the file cannot hold."""
-    if not header.isascii():
-        at = next(i for i, b in enumerate(header) if b > 127)
-        line = len(header[:at + 1].splitlines())
-        text = header.splitlines()[line - 1].decode("utf-8", errors="replace").strip()
-        raise MeshError(path, f"PLY header line is not ASCII text: {text[:60]!r}", line)
-    for line, (name, count) in _element_lines(header):
-        if not re.fullmatch(rb"[0-9]+", count):
-            raise MeshError(path, f"malformed PLY header line (element count "
-                                  f"{count.decode()!r} is not a decimal integer): "
-                                  f"{_header_line(header, line)!r}", line)
-        if int(count) > size:  # every record takes at least one byte
-            raise MeshError(path, f"PLY header declares {int(count):,} '{name.decode()}' "
-                                  f"records, more than a {size:,}-byte file can hold", line)
+        def refuse(k: int, why: str | None = None) -> MeshError:
+            r, p = int(record[k]), el.props[int(prop[k])]
+            tok = tokens[k].decode("ascii")[:30]
+            what = f"a list length of '{p.name}'" if is_count[k] else f"property '{p.name}'"
+            if why is None:
+                why = (f"expected {'an integer' if integer[k] else 'a number'} in {what}, "
+                       f"got {tok!r}")
+            return self._fail(el, r, why, lines)
 
-
-def _element_lines(header: bytes) -> list[tuple[int, tuple[bytes, bytes]]]:
-    out = []
-    for i, raw in enumerate(header.splitlines(), start=1):
-        tok = raw.split()
-        if tok[:1] == [b"element"] and len(tok) == 3:
-            out.append((i, (tok[1], tok[2])))
-    return out
-
-
-def _declared_elements(header: bytes) -> list[tuple[str, int]]:
-    return [(n.decode(), int(c)) for _, (n, c) in _element_lines(header)]
-
-
-def _header_line(header: bytes, line: int | None) -> str:
-    lines = header.splitlines()
-    if line is None or not 1 <= line <= len(lines):
-        return ""
-    return lines[line - 1].decode("ascii", errors="replace").strip()[:60]
-
-
-def _element_message(e, name: str, body_lines, line, header_lines) -> str:
-    """One line for a plyfile element error: what was wrong, in which record and property."""
-    rec = f"element '{name}'" + (f", record {e.row}" if e.row is not None else "")
-    prop = f", property '{e.prop.name}'" if e.prop is not None else ""
-    if e.message == "early end-of-file":
-        return f"PLY file ends inside element '{name}'" + (
-            f" (after {e.row:,} of {e.element.count:,} records)" if e.row is not None else "")
-    if e.message == "malformed input" and body_lines is not None and line is not None:
-        integer = e.prop is not None and np.dtype(e.prop.val_dtype).kind in "iu"
-        token = _bad_token(body_lines[line - header_lines - 1], integer)
-        expected = "an integer" if integer else "a number"
-        return f"expected {expected} in {rec}{prop}, got {token!r}"
-    if e.message == "early end-of-line":
-        return f"{rec}{prop}: the line ends early (a PLY record is one line)"
-    if e.message == "expected end-of-line":
-        return f"{rec}: more numbers on the line than the header declares"
-    return f"malformed PLY {rec}{prop}: {e.message}"
-
-
-def _bad_token(line: bytes, integer: bool) -> str:
-    for tok in line.decode("ascii", errors="replace").split():
         try:
-            int(tok) if integer else float(tok)
+            values = np.array(tokens, dtype=np.float64) if tokens else np.zeros(0)
         except ValueError:
-            return tok[:30]
-    return line.decode("ascii", errors="replace").strip()[:30]
+            for k, tok in enumerate(tokens):
+                try:
+                    float(tok)
+                except ValueError:
+                    raise refuse(k) from None
+            raise
+        def lengths_match(final: bool) -> None:
+            """Each list as long as its line says (before the type checks: where the
+            written length is a count at all; after them: everywhere)."""
+            for name, n in lengths.items():
+                i = next(i for i, p in enumerate(el.props) if p.name == name)
+                stated = values[(prop == i) & is_count]
+                bad = stated != n
+                if not final:
+                    bad &= (stated >= 0) & (stated == np.floor(stated))
+                if bad.any():
+                    r = int(np.argmax(bad))
+                    raise self._fail(el, r, f"a list of negative length {stated[r]:g}"
+                                     if stated[r] < 0 else
+                                     "the line ends early (a PLY record is one line)"
+                                     if stated[r] > n[r] else
+                                     "more numbers on the line than the header declares",
+                                     lines)
+
+        lengths_match(final=False)
+        if integer.any():
+            if integer.all():
+                plain = _NOT_INTEGER.search(self.body, *span) is None
+                ok = np.ones(len(tokens), dtype=bool) if plain else np.array(
+                    [_NOT_INTEGER.search(t) is None for t in tokens])
+            else:
+                ok = np.ones(len(tokens), dtype=bool)
+                sel = np.flatnonzero(integer)
+                ok[sel] = [_NOT_INTEGER.search(tokens[k]) is None for k in sel.tolist()]
+            if not ok.all():
+                raise refuse(int(np.argmin(ok)))
+        for c, t in enumerate(codes):
+            dt = np.dtype(_PLY_TYPES[t])
+            sel = code == c
+            if dt.kind in "iu":
+                info = np.iinfo(dt)
+                out = sel & ((values < info.min) | (values > info.max))
+                if out.any():
+                    k = int(np.argmax(out))
+                    raise refuse(k, f"{tokens[k].decode('ascii')[:30]} does not fit the "
+                                    f"PLY type '{t}' of "
+                                    + (f"a list length of '{el.props[int(prop[k])].name}'"
+                                       if is_count[k] else
+                                       f"property '{el.props[int(prop[k])].name}'"))
+            elif dt != np.float64 and sel.any():
+                with np.errstate(over="ignore"):
+                    values[sel] = values[sel].astype(dt)
+        lengths_match(final=True)
+        return values
+
+    def finish(self) -> None:
+        if self.next < len(self.records):
+            raise MeshError(self.path, "PLY file has data after its last element",
+                            self.header_lines + int(self.records[self.next]) + 1)
 
 
-def _ply_mesh(path: Path, ply, flip: bool, where) -> MeshData:
-    """The mesh of a parsed PLY file: its 'vertex' and 'face' elements, checked."""
-    if "vertex" not in ply:
+def _ply_mesh(path: Path, elements: dict[str, _Columns], declared: dict[str, _Element],
+              flip: bool, where) -> MeshData:
+    """The mesh of a parsed PLY file: its 'vertex' and 'face' elements, checked, values
+    rounded to float32 as Mitsuba stores them."""
+    if "vertex" not in elements:
         raise MeshError(path, "PLY file has no 'vertex' element")
-    vert = ply["vertex"].data
-    names = vert.dtype.names or ()
+    vert = elements["vertex"]
     for c in "xyz":
-        if c not in names:
+        if not isinstance(vert.get(c), np.ndarray):
             raise MeshError(path, f"PLY vertex element has no property '{c}'")
 
     def column_block(cols) -> np.ndarray:
         return np.stack([np.asarray(vert[c], dtype=np.float64) for c in cols], axis=1)
 
-    def check(a, what, normal=False):
+    def checked(cols, what, normal=False) -> np.ndarray:
+        a = column_block(cols)
         bad = _first_bad(a, normal)
         if bad is not None:
             raise MeshError(path, f"PLY vertex {bad[0]}: the {what} {_show_row(a, bad[0])} "
                                   f"{bad[1]}", where("vertex", bad[0]))
+        if all(vert[c].dtype == np.float32 for c in cols):
+            return a  # float32 values already
+        return a.astype(np.float32).astype(np.float64)
 
-    vertices = column_block("xyz")
-    check(vertices, "position")
+    def scalar(name: str) -> bool:
+        return isinstance(vert.get(name), np.ndarray)
+
+    vertices = checked("xyz", "position")
     normals = uvs = None
-    if all(c in names for c in ("nx", "ny", "nz")):
-        n = column_block(("nx", "ny", "nz"))
-        check(n, "normal", normal=True)
-        normals = _normalized(n)
+    if all(scalar(c) for c in ("nx", "ny", "nz")):
+        normals = _normalized(checked(("nx", "ny", "nz"), "normal", normal=True))
     for un, vn in _UV_NAMES:
-        if un in names and vn in names:
-            uvs = column_block((un, vn))
-            check(uvs, "texture coordinate")
+        if scalar(un) and scalar(vn):
+            uvs = checked((un, vn), "texture coordinate")
             if flip:
                 uvs[:, 1] = 1.0 - uvs[:, 1]
             break
 
-    if "face" not in ply:
+    if "face" not in elements:
         raise MeshError(path, "the mesh has no faces (no 'face' element)")
-    face = ply["face"]
-    key = next((k for k in _INDEX_NAMES if k in (face.data.dtype.names or ())), None)
-    prop = face.ply_property(key) if key is not None else None
-    if prop is None or not hasattr(prop, "len_dtype"):
+    face = elements["face"]
+    key = next((k for k in _INDEX_NAMES if isinstance(face.get(k), tuple)), None)
+    if key is None:
         raise MeshError(path, "PLY face element has no 'vertex_indices' (or 'vertex_index') "
                               "list")
-    if np.dtype(prop.len_dtype).kind not in "iu":
-        raise MeshError(path, f"PLY face list '{key}' has a length of type "
-                              f"{np.dtype(prop.len_dtype).name}; a length must be an integer")
-    col = face.data[key]
-    if col.dtype != object:  # the one-piece read: a (F, 3) array
-        counts = np.full(len(col), col.shape[1] if col.ndim == 2 else 0, dtype=np.int64)
-        flat = np.asarray(col).reshape(-1)
-    else:
-        counts = np.fromiter((len(a) for a in col), dtype=np.int64, count=len(col))
-        flat = (np.concatenate([np.asarray(a) for a in col]) if len(col)
-                else np.zeros(0, dtype=np.int64))
+    counts, flat = face[key]
+    counts = np.asarray(counts, dtype=np.int64)
     if len(counts) and counts.min() < 3:
         k = int(np.argmax(counts < 3))
         raise MeshError(path, f"PLY face {k} has fewer than 3 vertices", where("face", k))
@@ -758,7 +1118,8 @@ def _ply_mesh(path: Path, ply, flip: bool, where) -> MeshData:
     def face_of(i: int) -> int:
         return int(np.searchsorted(np.cumsum(counts), i, side="right"))
 
-    if flat.dtype.kind == "f":  # a float index list: only integer values name a vertex
+    item_type = next(p.type for p in declared["face"].props if p.name == key)
+    if _PLY_TYPES[item_type][0] == "f":  # a float index list: only integers name a vertex
         bad = ~np.isfinite(flat) | (flat != np.floor(flat))
         if bad.any():
             i = int(np.argmax(bad))
