@@ -3,7 +3,8 @@
 Writes the benchmark's torus knot (2 x segments x sides triangles, default
 144,000) as a binary PLY, an ascii PLY and an OBJ, plus a 2.9 MB OBJ of v and
 f lines and a 2.8 MB one of v/vt/vn lines (smaller knots, the latter with a uv
-grid and normals), and prints for each the median, minimum and maximum time of
+grid and normals), and the big knot as a binary PLY of alternate quads and
+triangles (lists of two lengths), and prints for each the median, minimum and maximum time of
 ``--repeat`` parses (the cache cleared before each) and of loads of the same
 unchanged file (cache hits). Then the time to load a scene with the 2.9 MB
 OBJ ten times (the cache cleared first).
@@ -24,6 +25,7 @@ from __future__ import annotations
 import argparse
 import importlib.util
 import statistics
+import struct
 import sys
 import tempfile
 import time
@@ -66,7 +68,23 @@ def write_files(folder: Path, segments: int, sides: int) -> list[Path]:
                    + "".join(f"vn {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in n)
                    + "".join("f " + " ".join(f"{i + 1}/{i + 1}/{i + 1}" for i in t) + "\n"
                              for t in f))
-    return [binary, text, obj, small, vtn]
+    # The big knot's faces as alternate quads and triangle pairs (binary): lists of two
+    # lengths, so read record by record for their lengths.
+    v, f = torus_knot(segments, sides)
+    q = len(f) // 2  # quad k is triangles k and k + q: (a, b, c) and (a, c, d)
+    records = []
+    for k in range(q):
+        a, b, c = f[k]
+        d = f[k + q][2]
+        records.append(struct.pack("<B4i", 4, a, b, c, d) if k % 2 == 0 else
+                       struct.pack("<B3iB3i", 3, a, b, c, 3, a, c, d))
+    mixed = folder / "knot_mixed.ply"
+    mixed.write_bytes((f"ply\nformat binary_little_endian 1.0\nelement vertex {len(v)}\n"
+                       "property float x\nproperty float y\nproperty float z\n"
+                       f"element face {q + q // 2}\n"
+                       "property list uchar int vertex_indices\nend_header\n").encode()
+                      + v.astype("<f4").tobytes() + b"".join(records))
+    return [binary, text, obj, small, vtn, mixed]
 
 
 SCENE = """
