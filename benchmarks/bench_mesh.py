@@ -4,7 +4,9 @@ Generates a torus-knot mesh of 2 x segments x sides triangles (default 144,000),
 places it in a scene lit by a point light, and renders it with the tracer and
 with Mitsuba's `direct` integrator at the same size and samples per pixel.
 Prints the BVH build time, the median render times after a warm-up, and
-their ratio (the target: the tracer within 3x of Mitsuba).
+their ratio (the target: the tracer within 3x of Mitsuba); and the time to
+read the mesh file (tracer/meshio.py): parsed (the PLY, and the same mesh
+written as OBJ), and loaded again (the cache's hit).
 
     python benchmarks/bench_mesh.py [--segments 1200] [--sides 60] [--size 640x480] [--spp 16]
 """
@@ -76,7 +78,7 @@ def main(argv=None) -> int:
 
     sys.path.insert(0, str(ROOT / "scenes" / "meshes"))
     import drjit as dr
-    from generate import torus_knot, write_ply
+    from generate import torus_knot, write_obj, write_ply
 
     from reference import mitsuba
     from reference.mitsuba_scene import load
@@ -88,6 +90,9 @@ def main(argv=None) -> int:
         v, f = torus_knot(args.segments, args.sides)
         mesh = Path(tmp) / "knot.ply"
         write_ply(mesh, v, f)
+        obj = Path(tmp) / "knot.obj"
+        write_obj(obj, v, f)
+        parse = {p.suffix: _load_times(p, args.repeat) for p in (mesh, obj)}
         scene_file = Path(tmp) / "scene.toml"
         w, h = args.size
         scene_file.write_text(SCENE.format(w=w, h=h, spp=args.spp, mesh=mesh))
@@ -121,11 +126,31 @@ def main(argv=None) -> int:
     print(f"mesh: {len(f):,} triangles; scene {w}x{h}, {spp} spp, backend {name}")
     print(f"  BVH build (numpy)          {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes)"
           f"; scene load incl. PLY {load_s:.3f} s; Mitsuba scene load {mi_load_s:.3f} s")
+    for suffix, (cold, warm, size) in parse.items():
+        print(f"  mesh file {suffix} ({size / 1e6:.1f} MB)   parsed {cold:8.4f} s, loaded again "
+              f"(cached) {warm * 1e6:.0f} us (medians of {args.repeat})")
     print(f"  tracer render              {t_tracer:8.3f} s (median of {args.repeat})")
     accel = "OptiX" if name == "cuda" else "Embree"
     print(f"  Mitsuba direct ({accel})    {t_mitsuba:8.3f} s")
     print(f"  ratio tracer / Mitsuba = {t_tracer / t_mitsuba:.2f} (target: within 3)")
     return 0
+
+
+def _load_times(path: Path, repeat: int) -> tuple[float, float, int]:
+    """Median seconds to parse the file (cache cleared first) and to load it again."""
+    from tracer import meshio
+
+    cold, warm = [], []
+    for _ in range(repeat):
+        meshio.clear_cache()
+        t0 = time.perf_counter()
+        meshio.load_mesh(path)
+        cold.append(time.perf_counter() - t0)
+        t0 = time.perf_counter()
+        meshio.load_mesh(path)
+        warm.append(time.perf_counter() - t0)
+    meshio.clear_cache()
+    return statistics.median(cold), statistics.median(warm), path.stat().st_size
 
 
 if __name__ == "__main__":

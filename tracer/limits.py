@@ -12,7 +12,9 @@ variable                  default                       what it bounds
 WHITTED_MAX_SAMPLES       2^32 - 1                      camera samples of one render
                                                         (width x height x spp), and
                                                         samples of one Fresnel table
-WHITTED_MAX_MEMORY        half the machine's memory     estimated memory of one job
+WHITTED_MAX_MEMORY        half the machine's memory     estimated memory of one job, and
+                                                        of reading a mesh file
+                                                        (tracer/meshio.py)
 WHITTED_MAX_DEPTH         1000                          max_depth (path segments)
 WHITTED_MAX_PRIMITIVES    2^31                          primitives, instances counted
                                                         once per instance

@@ -1,40 +1,75 @@
 """Triangle meshes from Wavefront OBJ and Stanford PLY files, and their vertex normals.
 
-Both readers are written here (no third-party mesh library) and follow what
-Mitsuba 3.9.1's ``obj`` and ``ply`` plugins make of the same file, so that a
-mesh means the same surface to the tracer and to the reference:
+A mesh means the same surface to the tracer and to the reference: what this
+module makes of a file is what Mitsuba 3.9.1's ``obj`` and ``ply`` plugins
+make of it (the tests compare the two):
 
-* OBJ indexes positions, texture coordinates and normals separately. A vertex
+* PLY files are parsed here, after Turk's description of the format: the
+  header to the letter (one ``format`` line of version 1.0, ``element`` and
+  ``property`` lines of known types, list lengths of integer types), then the
+  body, ascii (one record a line, each number of its declared type: integers
+  plain decimal integers in range, ``float`` values rounded to float32) or
+  binary of either byte order, with lists of any integer length type. The
+  permissively licensed PLY readers on PyPI that were measured (meshio,
+  trimesh, pyvista-miniply, VTK, Open3D, point-cloud-utils, pyntcloud) each
+  misread valid files or accept broken ones, even behind a wrapper, and
+  plyfile is GPL-licensed; the README says which case each gets wrong.
+  Triangle and quad meshes are read in one piece; mixed polygons record by
+  record for their list lengths, then in one piece.
+* OBJ files are parsed here: the OBJ readers on PyPI that were measured
+  (tinyobjloader, trimesh, pywavefront, openmesh, meshio, libigl) each differ
+  from Mitsuba's reading or refuse less than it does (negative indices taken
+  from the end of the file, quads split another way, bad numbers read as 0,
+  no line numbers, NumPy 2 arrays of zeros); the README says which and why.
+  OBJ indexes positions, texture coordinates and normals separately; a vertex
   of the result is one distinct (position, uv, normal) index triple, numbered
   in order of first use, which is how Mitsuba's ``obj`` plugin builds its
-  vertex table (a hash map from the triple to a new vertex id). A position
-  used with two different normals therefore becomes two vertices, and the
-  vertex normals computed later for a mesh without normals agree with
-  Mitsuba's, which are computed over the same vertex table.
+  vertex table (a hash map from the triple to a new vertex id). A position used with two different
+  normals therefore becomes two vertices, and the vertex normals computed
+  later for a mesh without normals agree with Mitsuba's.
 * Polygons are split into a triangle fan (v0, v_k, v_k+1), the order
   Mitsuba's ``obj`` plugin uses.
 * Texture coordinates: Mitsuba flips v (v -> 1 - v) for OBJ files by default
   (``flip_tex_coords = true``, for consistency with Mitsuba 0.x and 1) and not
   for PLY files; :func:`load_mesh` does the same unless told otherwise.
-* Normals read from a file are normalised, as Mitsuba does.
+* Normals read from a file are normalised, as Mitsuba does. PLY positions,
+  normals and uvs are rounded to float32 (a ``double`` too), as Mitsuba
+  stores them.
 * Vertex normals of a mesh without them are angle-weighted averages of the
   face normals (:func:`compute_vertex_normals`), Mitsuba's
   ``Mesh::recompute_vertex_normals``.
 
-Every problem with a file is a :class:`MeshError` whose one-line message names
-the file and, for a bad line of an OBJ file, its line number.
+Both formats are held to one rule, in the precision the tracer and Mitsuba
+store meshes in (float32): every position, normal and texture coordinate of
+the mesh's vertex table is finite in float32; every normal has a length that
+float32 can normalise (its squared length, in float32, neither 0 nor
+infinite: Mitsuba's ``obj`` plugin refuses such a normal, its ``ply`` plugin
+makes NaN of it); face indices are integers that name a vertex of the file;
+numbers are plain ASCII decimals (Python would read ``1_0`` or an
+Arabic-Indic digit as a number, Mitsuba would not). Every problem with a file
+is a :class:`MeshError` whose one-line message names the file and, where the
+format has lines (OBJ, the PLY header, ascii PLY bodies), the line.
+
+Parsed meshes are kept in a small cache (:data:`CACHE_MAX_MESHES` meshes,
+:data:`CACHE_MAX_BYTES` bytes of arrays, least recently used first out),
+keyed by the file's resolved path, device, inode, size and modification and
+change times (nanoseconds): loading the same, unchanged file again returns the
+same :class:`MeshData`, whose arrays are read-only.
 
 References: the OBJ format is Wavefront's "Object Files (.obj)" appendix of
 the Advanced Visualizer manual; the PLY format is Greg Turk's "The PLY Polygon
-File Format" (1994), with the type names of rply/Mitsuba (int8, uint8, ...,
-float32, float64) accepted besides char, uchar, short, ushort, int, uint,
-float and double.
+File Format" (1994).
 """
 
 from __future__ import annotations
 
 import math
+import os
+import re
+import stat
+import struct
 import sys
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -42,7 +77,23 @@ import numpy as np
 
 from tracer.errors import UserError
 
-__all__ = ["MeshData", "MeshError", "compute_vertex_normals", "face_normals", "load_mesh"]
+__all__ = ["CACHE_MAX_BYTES", "CACHE_MAX_MESHES", "MeshData", "MeshError", "clear_cache",
+           "compute_vertex_normals", "face_normals", "load_mesh"]
+
+#: The largest finite float32: positions, normals and uvs beyond it are infinite to the tracer.
+FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+#: Bytes of memory reading a mesh may take per byte of its file, as upper bounds for the
+#: WHITTED_MAX_MEMORY check made before reading: text (OBJ, ascii PLY) and binary PLY.
+#: Peaks measured with tracemalloc on 2.4-6.3 MB files: OBJ of v and f lines 23x its size,
+#: of v/vt/vn lines 15x, ascii PLY 16x (triangles; mixed triangles and quads 14x); binary
+#: PLY of triangles 4.2x, of mixed triangles and quads (their list lengths found record by
+#: record) 9.6x. The bounds leave a margin of about 1.4 over the largest.
+MEMORY_PER_FILE_BYTE = {"text": 32, "binary": 24}
+
+#: The cache's bounds: at most this many meshes, and this many bytes of arrays in all.
+CACHE_MAX_MESHES = 16
+CACHE_MAX_BYTES = 512 << 20
 
 
 class MeshError(UserError):
@@ -58,6 +109,9 @@ class MeshError(UserError):
 class MeshData:
     """A triangle mesh as read from a file (object space, Mitsuba's vertex order).
 
+    The arrays of a mesh returned by :func:`load_mesh` are read-only: the same
+    object is handed to every caller that loads the same file.
+
     Attributes
     ----------
     vertices : (V, 3) float64 positions.
@@ -70,9 +124,30 @@ class MeshData:
     normals: np.ndarray | None = None
     uvs: np.ndarray | None = None
 
+    @property
+    def nbytes(self) -> int:
+        return sum(a.nbytes for a in (self.vertices, self.faces, self.normals, self.uvs)
+                   if a is not None)
+
+
+# ---------------------------------------------------------------------------
+# Loading, and the cache of parsed meshes
+# ---------------------------------------------------------------------------
+
+_cache: OrderedDict[tuple, MeshData] = OrderedDict()
+
+
+def clear_cache() -> None:
+    """Forget every parsed mesh (the next :func:`load_mesh` of each file parses it again)."""
+    _cache.clear()
+
 
 def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshData:
     """Read an OBJ or PLY file (chosen by its contents, then by its suffix).
+
+    A file loaded before and unchanged since (same resolved path, device,
+    inode, size, modification and change time) is not parsed again: the
+    cached :class:`MeshData` is returned.
 
     Parameters
     ----------
@@ -83,27 +158,133 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
     Raises
     ------
     MeshError
-        When the file is missing, of an unknown format, malformed, refers to a
-        vertex it does not have, or has no faces.
+        When the file is missing or not a regular file, too large for the
+        memory limit, of an unknown format, malformed, refers to a vertex it
+        does not have, holds values float32 cannot represent, or has no faces.
     """
     path = Path(path)
+    key = _identity(path) + (flip_tex_coords,)
+    mesh = _cache.get(key)
+    if mesh is not None:
+        _cache.move_to_end(key)
+        return mesh
+    mesh = _read_mesh(path, key[3], flip_tex_coords)
+    for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
+        if a is not None:
+            a.flags.writeable = False
+    if _identity(path) == key[:-1]:  # not cached if the file changed while it was read
+        _remember(key, mesh)
+    return mesh
+
+
+def _identity(path: Path) -> tuple:
+    """(resolved path, device, inode, size, modification and change time in ns)."""
+    st = _stat_regular(path)
+    return (os.path.realpath(path), st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns,
+            st.st_ctime_ns)
+
+
+def _remember(key: tuple, mesh: MeshData) -> None:
+    """Cache ``mesh``, dropping older versions of the file and the least recently used
+    meshes beyond the bounds."""
+    for old in [k for k in _cache if k[0] == key[0] and k[1:-1] != key[1:-1]]:
+        del _cache[old]  # an older version of the same file
+    if mesh.nbytes > CACHE_MAX_BYTES:
+        return
+    _cache[key] = mesh
+    while len(_cache) > CACHE_MAX_MESHES or sum(m.nbytes for m in _cache.values()) \
+            > CACHE_MAX_BYTES:
+        _cache.popitem(last=False)
+
+
+def _stat_regular(path: Path) -> os.stat_result:
     try:
-        data = path.read_bytes()
+        st = os.stat(path)
     except FileNotFoundError:
         raise MeshError(path, "no such mesh file") from None
+    except (OSError, ValueError) as e:  # too long, a loop of links, a NUL in the name, ...
+        raise MeshError(path, f"cannot read the mesh file ({getattr(e, 'strerror', None) or e})"
+                        ) from None
+    if stat.S_ISDIR(st.st_mode):
+        raise MeshError(path, "is a folder, expected a mesh file")
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "a device")
+        raise MeshError(path, f"is {kind}, expected a regular file (an OBJ or PLY mesh)")
+    return st
+
+
+def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None) -> MeshData:
+    """Parse the file (no cache): the format by its first bytes, then by its suffix."""
+    from tracer.limits import check_memory
+
+    def check(kind: str) -> None:
+        try:
+            check_memory(size * MEMORY_PER_FILE_BYTE[kind],
+                         f"reading this {size:,}-byte mesh file")
+        except UserError as e:
+            raise MeshError(path, str(e)) from None
+
+    try:
+        with open(path, "rb") as fh:
+            magic = fh.read(4)
+            if magic[:3] == b"ply" and magic[3:4] in (b"\n", b"\r", b" ", b"\t"):
+                check("binary")  # ascii PLY files are checked again once their header is read
+                mesh = _read_ply(path, fh, size, bool(flip_tex_coords), check)
+            elif path.suffix.lower() == ".obj":
+                check("text")
+                data = magic + fh.read()
+                mesh = _read_obj(path, data, True if flip_tex_coords is None
+                                 else flip_tex_coords)
+            elif path.suffix.lower() == ".ply":
+                raise MeshError(path, "not a PLY file (it does not start with 'ply')")
+            else:
+                raise MeshError(path, f"unknown mesh format {path.suffix!r} "
+                                      "(expected .obj or .ply)")
     except OSError as e:
         raise MeshError(path, f"cannot read the mesh file ({e.strerror or e})") from None
-    if data.startswith(b"ply") and data[3:4] in (b"\n", b"\r", b" ", b"\t"):
-        mesh = _read_ply(path, data, bool(flip_tex_coords))
-    elif path.suffix.lower() == ".obj":
-        mesh = _read_obj(path, data, True if flip_tex_coords is None else flip_tex_coords)
-    elif path.suffix.lower() == ".ply":
-        raise MeshError(path, "not a PLY file (it does not start with 'ply')")
-    else:
-        raise MeshError(path, f"unknown mesh format {path.suffix!r} (expected .obj or .ply)")
     if len(mesh.faces) == 0:
         raise MeshError(path, "the mesh has no faces")
     return mesh
+
+
+# ---------------------------------------------------------------------------
+# Values the tracer can use (float32), for both formats
+# ---------------------------------------------------------------------------
+
+
+def _first_bad(a: np.ndarray, normal: bool = False) -> tuple[int, str] | None:
+    """(row, reason) of the first row of ``a`` float32 cannot hold, or None.
+
+    A row must be finite, and finite once rounded to float32; a normal's
+    squared length, summed in float32 as Mitsuba normalises it, must be
+    neither 0 (the normal is zero, or underflows) nor infinite.
+    """
+    a = np.asarray(a, dtype=np.float64)
+    with np.errstate(over="ignore", under="ignore", invalid="ignore"):
+        finite = np.isfinite(a).all(axis=1)
+        a32 = a.astype(np.float32)
+        in_range = np.isfinite(a32).all(axis=1)
+        ok = finite & in_range
+        if normal:
+            s = np.sum(a32 * a32, axis=1, dtype=np.float32)
+            ok &= (s > 0) & np.isfinite(s)
+    if ok.all():
+        return None
+    i = int(np.argmin(ok))
+    if not finite[i]:
+        why = "is not finite (in float32)"
+    elif not in_range[i]:
+        why = f"is beyond float32's range (up to {FLOAT32_MAX:.4g})"
+    elif s[i] == 0:
+        why = "is zero in float32 (a normal must have a direction)"
+    else:
+        why = "is too long for float32 to normalise (its squared length overflows)"
+    return i, why
+
+
+def _show_row(a: np.ndarray, i: int) -> str:
+    return "(" + ", ".join(f"{float(x):.6g}" for x in a[i]) + ")"
 
 
 # ---------------------------------------------------------------------------
@@ -208,12 +389,20 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
     counts: list[int] = []
 
     text = data.decode("utf-8", errors="replace")
-    for lineno, raw in enumerate(text.splitlines(), start=1):
-        parts = raw.split("#", 1)[0].split()  # '#' starts a comment, also after data
+    lines = text.splitlines()
+    plain = text.isascii() and "_" not in text  # else each line of numbers is checked
+    for lineno, raw in enumerate(lines, start=1):
+        body = raw.split("#", 1)[0]  # '#' starts a comment, also after data
+        parts = body.split()
         if not parts:
             continue
         kind = parts[0]
+        if kind not in ("v", "vt", "vn", "f"):
+            continue  # o, g, s, usemtl, mtllib, l, p, ...: not geometry we render
         try:
+            if not plain and (not body.isascii() or "_" in body):
+                # Python's float() and int() read '1_0' and non-ASCII digits; Mitsuba does not.
+                raise ValueError("numbers must be plain ASCII decimals")
             if kind == "v":
                 # x y z [w] or x y z r g b (vertex colours): the position is the first three.
                 if len(parts) < 4:
@@ -227,7 +416,7 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
                 if len(parts) < 4:
                     raise ValueError("expected 'vn x y z'")
                 nrm.append(_finite(parts[1:4]))
-            elif kind == "f":
+            else:
                 if len(parts) < 4:
                     raise ValueError("a face needs at least 3 vertices")
                 np_, nt, nn = len(pos), len(tex), len(nrm)
@@ -242,7 +431,6 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
                     cn.append(_obj_index(fields[2], nn, "normal")
                               if len(fields) > 2 and fields[2] else -1)
                 counts.append(len(parts) - 1)
-            # o, g, s, usemtl, mtllib, l, p, comments, ...: not geometry we render.
         except ValueError as e:
             msg = str(e)
             if msg.startswith("refers to"):
@@ -265,19 +453,55 @@ def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
     uniq = uniq[order]
     corner_vertex = rank[inverse.reshape(-1)]
 
-    vertices = np.asarray(pos, dtype=np.float64).reshape(-1, 3)[uniq[:, 0]]
+    p = np.asarray(pos, dtype=np.float64).reshape(-1, 3)
+    _check_obj_table(path, lines, "v", "position", p, uniq[:, 0])
+    vertices = p[uniq[:, 0]]
     uvs = normals = None
     if tex and (uniq[:, 1] >= 0).any():
         # Corners without a uv get (0, 0) (Mitsuba leaves them undefined).
         t = np.asarray(tex, dtype=np.float64).reshape(-1, 2)
+        _check_obj_table(path, lines, "vt", "texture coordinate", t, uniq[:, 1])
         if flip:
             t[:, 1] = 1.0 - t[:, 1]
         uvs = np.where((uniq[:, 1] >= 0)[:, None], t[np.maximum(uniq[:, 1], 0)], 0.0)
     if nrm and (uniq[:, 2] >= 0).all():
         # Only when every corner has one; otherwise all are computed from the faces.
-        normals = _normalized(np.asarray(nrm, dtype=np.float64)[uniq[:, 2]])
+        n = np.asarray(nrm, dtype=np.float64)
+        _check_obj_table(path, lines, "vn", "normal", n, uniq[:, 2])
+        normals = _normalized(n[uniq[:, 2]])
     faces = _fan(corner_vertex, np.asarray(counts))
     return MeshData(vertices, faces, normals, uvs)
+
+
+def _check_obj_table(path: Path, lines: list[str], kind: str, what: str, table: np.ndarray,
+                     used: np.ndarray) -> None:
+    """Refuse the first element of ``table`` the faces use that float32 cannot hold.
+
+    Elements no face uses are not checked (Mitsuba's vertex table holds only
+    the used ones), except for the finiteness every number of the file is
+    checked for as it is read.
+    """
+    mask = np.zeros(len(table), dtype=bool)
+    mask[used[used >= 0]] = True
+    rows = np.flatnonzero(mask)
+    bad = _first_bad(table[rows], normal=kind == "vn")
+    if bad is None:
+        return
+    k = int(rows[bad[0]])
+    line = _nth_line_of_kind(lines, kind, k)
+    raise MeshError(path, f"the {what} {_show_row(table, k)} {bad[1]}", line)
+
+
+def _nth_line_of_kind(lines: list[str], kind: str, k: int) -> int | None:
+    """Line number of the k-th (0-based) ``kind`` statement, for messages."""
+    seen = 0
+    for lineno, raw in enumerate(lines, start=1):
+        parts = raw.split("#", 1)[0].split(None, 1)
+        if parts and parts[0] == kind:
+            if seen == k:
+                return lineno
+            seen += 1
+    return None
 
 
 def _finite(words: list[str]) -> list[float]:
@@ -306,6 +530,8 @@ def _obj_index(token: str, count: int, what: str) -> int:
 # PLY
 # ---------------------------------------------------------------------------
 
+#: PLY's scalar types (Turk's names and the sized aliases), and the unofficial 64-bit and
+#: half types Mitsuba's ply plugin also reads, as NumPy type codes (byte order added later).
 _PLY_TYPES = {
     "char": "i1", "int8": "i1", "uchar": "u1", "uint8": "u1",
     "short": "i2", "int16": "i2", "ushort": "u2", "uint16": "u2",
@@ -314,13 +540,26 @@ _PLY_TYPES = {
     "half": "f2", "float16": "f2",
     "float": "f4", "float32": "f4", "double": "f8", "float64": "f8",
 }
+_PLY_FORMATS = {"ascii": None, "binary_little_endian": "<", "binary_big_endian": ">"}
+#: Names of the face element's index list, and of the texture coordinates in the order
+#: of preference of Mitsuba's ply plugin.
+_INDEX_NAMES = ("vertex_indices", "vertex_index")
+_UV_NAMES = (("u", "v"), ("texture_u", "texture_v"), ("s", "t"))
+#: Elements whose data makes the mesh; the others are read (ascii: checked) and dropped.
+_KEPT = ("vertex", "face")
+#: A token of an integer-typed ascii property: optional sign, decimal digits.
+_NOT_INTEGER = re.compile(rb"[^0-9+\-\s]")
 
 
 @dataclass
 class _Prop:
     name: str
-    dtype: str              # numpy type code of the value (of the items, for a list)
-    count_dtype: str | None = None  # numpy type code of a list's length; None: a scalar
+    type: str               # the PLY type of the value (of the items, for a list)
+    count_type: str | None  # the PLY type of a list's length; None for a scalar
+
+    @property
+    def integer(self) -> bool:
+        return _PLY_TYPES[self.type][0] in "iu"
 
 
 @dataclass
@@ -330,336 +569,570 @@ class _Element:
     props: list[_Prop]
 
 
-def _parse_ply_header(path: Path, data: bytes) -> tuple[str, list[_Element], int]:
-    """(format, elements, offset of the body) of a PLY file."""
-    end = data.find(b"end_header")
-    if end < 0:
-        raise MeshError(path, "PLY header has no 'end_header'")
-    nl = data.find(b"\n", end)
-    body = len(data) if nl < 0 else nl + 1
+#: What is read of one element: per property, a column of values (a scalar) or the
+#: (counts, flat items) of its lists; and, for an ascii file, the line of each record.
+_Columns = dict[str, "np.ndarray | tuple[np.ndarray, np.ndarray]"]
+
+
+def _read_ply(path: Path, fh, size: int, flip: bool, check_memory) -> MeshData:
+    """Parse an ascii or binary PLY file (Turk's format): its header to the letter, then
+    the body, every element in turn; elements other than vertex and face are dropped."""
+    fh.seek(0)
+    data = fh.read(size)  # a sized read: several times faster than reading to the end
+    fmt, elements, body, header_lines = _parse_ply_header(path, data, size)
+    if fmt == "ascii":
+        check_memory("text")
+        reader = _PlyAscii(path, data[body:], header_lines)
+    else:
+        reader = _PlyBinary(path, data, body, _PLY_FORMATS[fmt])
+    kept: dict[str, _Columns] = {}
+    lines: dict[str, np.ndarray | None] = {}
+    for el in elements:
+        cols, rec_lines = reader.element(el, keep=el.name in _KEPT)
+        if el.name in _KEPT:
+            kept[el.name], lines[el.name] = cols, rec_lines
+    reader.finish()
+    elements_by_name = {el.name: el for el in elements}
+
+    def where(element: str, row: int | None) -> int | None:
+        """Line of record ``row`` of ``element`` in an ascii file."""
+        rec = lines.get(element)
+        return None if rec is None or row is None else int(rec[row])
+
+    return _ply_mesh(path, kept, elements_by_name, flip, where)
+
+
+def _parse_ply_header(path: Path, data: bytes, size: int
+                      ) -> tuple[str, list[_Element], int, int]:
+    """(format, elements, offset of the body, number of header lines) of a PLY file.
+
+    Lines end in LF, CRLF or CR (the first line's ending is the file's); the
+    grammar is Turk's: ``ply``, one ``format <ascii|binary_little_endian|
+    binary_big_endian> 1.0``, then ``element <name> <count>`` lines each
+    followed by its ``property <type> <name>`` and ``property list
+    <length type> <item type> <name>`` lines, ``comment`` and ``obj_info``
+    lines anywhere, and ``end_header``.
+    """
+    found = re.search(rb"(?:\A|[\r\n])end_header[ \t]*(\r\n|\r|\n|\Z)", data)
+    if found is None:
+        raise MeshError(path, "PLY header has no 'end_header' line")
+    end, body = found.start(1), found.end(1)
+    if found.group(1) == b"\r\n" and data[3:5] != b"\r\n":
+        body -= 1  # lines end in CR: the LF is the body's first byte
+    header = data[:end]
+    lines = header.splitlines()
+    if not header.isascii():
+        at = next(i for i, b in enumerate(header) if b > 127)
+        n = len(header[:at + 1].splitlines())
+        text = lines[n - 1].decode("utf-8", errors="replace").strip()
+        raise MeshError(path, f"PLY header line is not ASCII text: {text[:60]!r}", n)
     fmt = None
     elements: list[_Element] = []
-    lines = data[:end + len(b"end_header")].decode("latin-1").splitlines()
-    for lineno, line in enumerate(lines, start=1):
-        tok = line.split()
-        if not tok or tok[0] in ("comment", "obj_info", "ply", "end_header"):
+    for lineno, raw in enumerate(lines, start=1):
+        tok = raw.decode("ascii").split()
+        text = raw.decode("ascii").strip()[:60]
+
+        def bad(why: str, lineno: int = lineno, text: str = text) -> MeshError:
+            return MeshError(path, f"malformed PLY header line ({why}): {text!r}", lineno)
+
+        if lineno == 1:
+            if tok != ["ply"]:
+                raise bad("the first line must be 'ply' alone")
             continue
-        bad = MeshError(path, f"malformed PLY header line: {line.strip()[:60]!r}", lineno)
-        if tok[0] == "format":
-            if len(tok) != 3 or tok[1] not in ("ascii", "binary_little_endian",
-                                               "binary_big_endian"):
-                raise bad
+        if not tok or tok[0] in ("comment", "obj_info"):
+            continue
+        key = tok[0]
+        if key == "end_header":
+            if len(tok) != 1 or lineno != len(lines):
+                raise bad("'end_header' stands alone on the last header line")
+        elif key == "format":
+            if fmt is not None:
+                raise bad("a second 'format' line")
+            if elements:
+                raise bad("'format' must come before the elements")
+            if len(tok) != 3 or tok[1] not in _PLY_FORMATS:
+                raise bad("expected 'format ascii|binary_little_endian|binary_big_endian 1.0'")
+            if tok[2] != "1.0":
+                raise bad(f"PLY version {tok[2]!r}, only '1.0' exists")
             fmt = tok[1]
-        elif tok[0] == "element":
-            if len(tok) != 3 or not tok[2].isdigit():
-                raise bad
-            elements.append(_Element(tok[1], int(tok[2]), []))
-        elif tok[0] == "property":
+        elif key == "element":
+            if len(tok) != 3:
+                raise bad("expected 'element <name> <count>'")
+            if not re.fullmatch(r"[0-9]+", tok[2]):
+                raise bad(f"element count {tok[2]!r} is not a decimal integer")
+            if any(el.name == tok[1] for el in elements):
+                raise bad(f"two elements of the same name '{tok[1]}'")
+            count = int(tok[2])
+            if count > size:  # every record takes at least one byte
+                raise MeshError(path, f"PLY header declares {count:,} '{tok[1]}' records, "
+                                      f"more than a {size:,}-byte file can hold", lineno)
+            elements.append(_Element(tok[1], count, []))
+        elif key == "property":
             if not elements:
-                raise bad
-            if len(tok) == 5 and tok[1] == "list":
-                if tok[2] not in _PLY_TYPES or tok[3] not in _PLY_TYPES:
-                    raise MeshError(path, f"unknown PLY type in {line.strip()!r}", lineno)
-                if _PLY_TYPES[tok[2]][0] == "f":
-                    raise MeshError(path, f"a list length must be an integer type: "
-                                          f"{line.strip()!r}", lineno)
-                elements[-1].props.append(_Prop(tok[4], _PLY_TYPES[tok[3]], _PLY_TYPES[tok[2]]))
+                raise bad("a property before any element")
+            if len(tok) >= 2 and tok[1] == "list":
+                if len(tok) != 5:
+                    raise bad("expected 'property list <length type> <item type> <name>'")
+                types, name = tok[2:4], tok[4]
             elif len(tok) == 3:
-                if tok[1] not in _PLY_TYPES:
-                    raise MeshError(path, f"unknown PLY type in {line.strip()!r}", lineno)
-                elements[-1].props.append(_Prop(tok[2], _PLY_TYPES[tok[1]]))
+                types, name = tok[1:2], tok[2]
             else:
-                raise bad
+                raise bad("expected 'property <type> <name>'")
+            for t in types:
+                if t not in _PLY_TYPES:
+                    raise bad(f"unknown PLY type {t!r}")
+            if len(types) == 2 and _PLY_TYPES[types[0]][0] not in "iu":
+                raise bad(f"a list's length must be of an integer type, not {types[0]!r}")
+            if any(p.name == name for p in elements[-1].props):
+                raise bad(f"two properties of the same name '{name}'")
+            elements[-1].props.append(_Prop(name, types[-1],
+                                            types[0] if len(types) == 2 else None))
         else:
-            raise bad
+            raise bad(f"unknown keyword {key!r}")
+        if key != "format" and fmt is None:
+            raise bad("the 'format' line must come first, after 'ply'")
     if fmt is None:
         raise MeshError(path, "PLY header has no 'format' line")
-    return fmt, elements, body
+    return fmt, elements, body, len(lines)
 
 
-def _read_ply(path: Path, data: bytes, flip: bool) -> MeshData:
-    """Parse an ascii or binary PLY file; elements other than vertex and face are skipped."""
-    fmt, elements, body = _parse_ply_header(path, data)
-    if fmt == "ascii":
-        reader = _AsciiBody(path, data[body:], data[:body].count(b"\n"))
-    else:
-        reader = _BinaryBody(path, data, body, "<" if fmt == "binary_little_endian" else ">")
-    values: dict[str, dict[str, np.ndarray]] = {}
-    for el in elements:
-        wanted = el.name in ("vertex", "face")
-        values[el.name] = reader.element(el, keep=wanted)
-    reader.finish()
+def _record_layout(el: _Element) -> tuple[list[_Prop], int | None]:
+    """(the list properties, the position of the only list among the properties or None)."""
+    lists = [p for p in el.props if p.count_type]
+    only = el.props.index(lists[0]) if len(lists) == 1 else None
+    return lists, only
 
-    if "vertex" not in values:
+
+class _PlyBinary:
+    """Reads the elements of a binary PLY body one after the other.
+
+    Records of fixed size, and records whose lists all have the length of
+    the first record's (triangle or quad meshes), are read in one piece;
+    others (mixed polygons) record by record for their list lengths, then
+    gathered in one piece.
+    """
+
+    def __init__(self, path: Path, data: bytes, offset: int, order: str):
+        self.path, self.data, self.offset, self.order = path, data, offset, order
+        self.buf = np.frombuffer(data, dtype=np.uint8)
+
+    def _dtype(self, t: str) -> np.dtype:
+        return np.dtype(self.order + _PLY_TYPES[t])
+
+    def _ends(self, el: _Element, row: int) -> MeshError:
+        return MeshError(self.path, f"PLY file ends inside element '{el.name}' (after "
+                                    f"{row:,} of {el.count:,} records)")
+
+    def element(self, el: _Element, keep: bool) -> tuple[_Columns, None]:
+        lists, _ = _record_layout(el)
+        if not lists or el.count == 0:
+            return self._fixed(el, [None] * len(el.props), keep), None
+        first = self._first_lengths(el)
+        if first is not None:
+            cols = self._fixed(el, first, keep, check=True)
+            if cols is not None:
+                return cols, None
+        return self._walk(el, keep), None
+
+    def _first_lengths(self, el: _Element) -> list[int | None] | None:
+        """Lengths of the first record's lists (None for scalars), or None if it is cut."""
+        off, out = self.offset, []
+        for p in el.props:
+            if p.count_type:
+                dt = self._dtype(p.count_type)
+                if off + dt.itemsize > len(self.data):
+                    return None
+                n = int(np.frombuffer(self.data, dt, 1, off)[0])
+                if n < 0:
+                    return None
+                out.append(n)
+                off += dt.itemsize + n * self._dtype(p.type).itemsize
+            else:
+                out.append(None)
+                off += self._dtype(p.type).itemsize
+        return out
+
+    def _fixed(self, el: _Element, lengths: list[int | None], keep: bool,
+               check: bool = False) -> _Columns | None:
+        """Every record laid out alike (lists of the given lengths): one structured read.
+        With ``check``, None when some list's length differs (or the body is too short
+        to tell)."""
+        fields, itemsize = [], 0
+        for i, (p, n) in enumerate(zip(el.props, lengths, strict=True)):
+            if n is None:
+                fields.append((f"p{i}", self._dtype(p.type)))
+                itemsize += self._dtype(p.type).itemsize
+            else:
+                fields.append((f"c{i}", self._dtype(p.count_type)))
+                itemsize += self._dtype(p.count_type).itemsize + n * self._dtype(p.type).itemsize
+                if n:
+                    fields.append((f"p{i}", self._dtype(p.type), (n,)))
+        left = len(self.data) - self.offset
+        if itemsize == 0:  # an element without properties holds no bytes
+            return {}
+        if itemsize * el.count > left:
+            if check:
+                return None
+            raise self._ends(el, left // itemsize)
+        rec = np.frombuffer(self.data, np.dtype(fields), el.count, self.offset)
+        for i, n in enumerate(lengths):
+            if n is not None and np.any(rec[f"c{i}"] != n):
+                return None
+        self.offset += itemsize * el.count
+        if not keep:
+            return {}
+        out: _Columns = {}
+        for i, (p, n) in enumerate(zip(el.props, lengths, strict=True)):
+            if n is None:
+                out[p.name] = rec[f"p{i}"]
+            else:
+                flat = (rec[f"p{i}"].reshape(-1) if n else np.zeros(0, self._dtype(p.type)))
+                out[p.name] = (np.full(el.count, n, dtype=np.int64), flat)
+        return out
+
+    def _walk(self, el: _Element, keep: bool) -> _Columns:
+        """Records with lists of varying lengths: the offsets found record by record (the
+        lengths decide where the next value is), the values then gathered at once."""
+        data, n_bytes = self.data, len(self.data)
+        # The record as runs: bytes of scalars, then a list (length unpacker, sizes), ...
+        steps: list[tuple[int, object, int, int]] = []
+        fixed = 0
+        for p in el.props:
+            if p.count_type:
+                cdt = self._dtype(p.count_type)
+                steps.append((fixed, struct.Struct(self.order + cdt.char).unpack_from,
+                              cdt.itemsize, self._dtype(p.type).itemsize))
+                fixed = 0
+            else:
+                fixed += self._dtype(p.type).itemsize
+        tail = fixed
+        k = len(steps)
+        starts = np.empty((el.count, k), dtype=np.int64)  # offset of each list's length
+        lengths = np.empty((el.count, k), dtype=np.int64)
+        off = self.offset
+        for r in range(el.count):
+            for j, (before, unpack, csize, isize) in enumerate(steps):
+                off += before
+                if off + csize > n_bytes:
+                    raise self._ends(el, r)
+                n = unpack(data, off)[0]
+                if n < 0:
+                    raise MeshError(self.path, f"PLY element '{el.name}', record {r}: a list "
+                                               f"of negative length {n}")
+                starts[r, j], lengths[r, j] = off, n
+                off += csize + n * isize
+            off += tail
+            if off > n_bytes:
+                raise self._ends(el, r)
+        record_start = starts[:, 0] - steps[0][0]
+        self.offset = off
+        if not keep:
+            return {}
+        out: _Columns = {}
+        at = record_start  # offset of the current property in each record
+        j = 0
+        for p in el.props:
+            dt = self._dtype(p.type)
+            if p.count_type:
+                _, _, csize, isize = steps[j]
+                n = lengths[:, j]
+                first = starts[:, j] + csize
+                total = int(n.sum())
+                item = np.arange(total) - np.repeat(np.cumsum(n) - n, n)
+                out[p.name] = (n, self._gather(np.repeat(first, n) + item * isize, dt))
+                at = first + n * isize
+                j += 1
+            else:
+                out[p.name] = self._gather(at, dt)
+                at = at + dt.itemsize
+        return out
+
+    def _gather(self, offsets: np.ndarray, dt: np.dtype) -> np.ndarray:
+        """The values of type ``dt`` at these byte offsets of the file."""
+        idx = offsets[:, None] + np.arange(dt.itemsize)
+        return self.buf[idx].reshape(-1).view(dt)
+
+    def finish(self) -> None:
+        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
+        tail = self.data[self.offset:self.offset + 4097]
+        if len(tail) > 4096 or tail.strip(b"\r\n\x00 "):
+            raise MeshError(self.path, "PLY file has data after its last element")
+
+
+class _PlyAscii:
+    """Reads the elements of an ascii PLY body: one record a line (blank lines skipped),
+    each number of the type the header declares for it."""
+
+    def __init__(self, path: Path, body: bytes, header_lines: int):
+        self.path, self.header_lines = path, header_lines
+        if not body.isascii():
+            at = next(i for i, b in enumerate(body) if b > 127)
+            raise MeshError(path, "the PLY body is not ASCII text (a number must be plain "
+                                  "ASCII decimals)", header_lines + len(body[:at + 1].splitlines()))
+        if b"_" in body:  # Python reads '1_0' as 10; it is not a PLY number
+            at = body.index(b"_")
+            raise MeshError(path, "malformed number in the PLY body (a '_' in it)",
+                            header_lines + len(body[:at + 1].splitlines()))
+        # One pass over the bytes: where each token starts, on which line, so that the
+        # records (non-blank lines) and their widths are known before any number is read.
+        body = body.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+        self.body = body
+        self.tokens = body.split()
+        c = np.frombuffer(body, dtype=np.uint8)
+        space = (c == 32) | ((c >= 9) & (c <= 12))  # what bytes.split() splits at
+        first = ~space
+        first[1:] &= space[:-1]
+        newlines = np.flatnonzero(c == 10)
+        line = np.searchsorted(newlines, np.flatnonzero(first), side="right")
+        widths = np.bincount(line, minlength=len(newlines) + 1)
+        self.records = np.flatnonzero(widths)  # the body lines that hold a record
+        self.widths = widths[self.records]
+        self.first_token = np.concatenate(([0], np.cumsum(self.widths)))
+        self.line_start = np.concatenate(([0], newlines + 1))  # byte offset of each line
+        self.next = 0  # the next record (index into self.records)
+
+    def element(self, el: _Element, keep: bool) -> tuple[_Columns, np.ndarray]:
+        a, b = self.next, self.next + el.count
+        if b > len(self.records):
+            raise MeshError(self.path, f"PLY file ends inside element '{el.name}' (after "
+                                       f"{len(self.records) - a:,} of {el.count:,} records)")
+        self.next = b
+        rows = self.records[a:b]
+        lines = self.header_lines + rows + 1  # 1-based line of each record
+        widths = self.widths[a:b]
+        tokens = self.tokens[self.first_token[a]:self.first_token[b]]
+        span = ((int(self.line_start[rows[0]]), int(self.line_start[rows[-1] + 1])
+                 if rows[-1] + 1 < len(self.line_start) else len(self.body))
+                if len(rows) else (0, 0))
+        starts = self.first_token[a:b] - self.first_token[a]  # each record's first token
+        record = np.repeat(np.arange(el.count), widths)  # record of each token
+        prop, is_count, lengths = self._layout(el, tokens, widths, starts, record, lines)
+        values = self._numbers(el, tokens, span, record, prop, is_count, lengths, lines)
+        if not keep:
+            return {}, lines
+        cols: _Columns = {}
+        for i, p in enumerate(el.props):
+            if p.count_type:
+                cols[p.name] = (lengths[p.name], values[(prop == i) & ~is_count])
+            else:
+                cols[p.name] = values[prop == i]
+        return cols, lines
+
+    def _fail(self, el: _Element, r: int, message: str, lines: np.ndarray) -> MeshError:
+        return MeshError(self.path, f"element '{el.name}', record {r}: {message}",
+                         int(lines[r]))
+
+    def _layout(self, el, tokens, widths, starts, record, lines):
+        """(property of each token, whether it is a list's length, each list property's
+        lengths): from the line widths alone when a record has at most one list (its
+        length is what the line holds beyond the scalars), record by record otherwise."""
+        lists, only = _record_layout(el)
+        scalars = len(el.props) - len(lists)
+        short = "the line ends early (a PLY record is one line)"
+        extra = "more numbers on the line than the header declares"
+        j = np.arange(len(tokens)) - starts[record]  # position of each token in its record
+        if not lists:
+            bad = widths != scalars
+            if bad.any():
+                r = int(np.argmax(bad))
+                raise self._fail(el, r, short if widths[r] < scalars else extra, lines)
+            return j, np.zeros(len(tokens), dtype=bool), {}
+        if only is not None:
+            if (widths < scalars + 1).any():
+                raise self._fail(el, int(np.argmax(widths < scalars + 1)), short, lines)
+            n = widths - scalars - 1  # checked against the lengths written, once read
+            nr = n[record]
+            prop = np.where(j <= only, j, np.where(j <= only + nr, only, j - nr))
+            return prop, j == only, {lists[0].name: n}
+        # Several lists a record: walk each record.
+        prop = np.empty(len(tokens), dtype=np.int64)
+        is_count = np.zeros(len(tokens), dtype=bool)
+        lengths: dict[str, list[int]] = {p.name: [] for p in lists}
+        for r in range(el.count):
+            k, end = int(starts[r]), int(starts[r] + widths[r])
+            for i, p in enumerate(el.props):
+                if k >= end:
+                    raise self._fail(el, r, short, lines)
+                prop[k] = i
+                if p.count_type:
+                    is_count[k] = True
+                    try:
+                        n = int(tokens[k])
+                    except ValueError:
+                        n = 0  # not an integer: refused with the numbers below
+                    if n < 0 or k + 1 + n > end:
+                        raise self._fail(el, r, short if n >= 0 else
+                                         f"a list of negative length {n}", lines)
+                    prop[k + 1:k + 1 + n] = i
+                    lengths[p.name].append(n)
+                    k += 1 + n
+                else:
+                    k += 1
+            if k != end:
+                raise self._fail(el, r, extra, lines)
+        return prop, is_count, {name: np.asarray(v, dtype=np.int64)
+                                for name, v in lengths.items()}
+
+    def _numbers(self, el, tokens, span, record, prop, is_count, lengths, lines
+                 ) -> np.ndarray:
+        """The tokens as numbers of their declared types (float64 holding them): integers
+        plain decimal integers in their type's range, floats rounded to their type. The
+        first bad token is refused naming its record, property and line; a list whose
+        written length is not what its line holds, naming its record and line."""
+        type_of = {}  # (property, is a length) -> PLY type
+        for i, p in enumerate(el.props):
+            type_of[i, False] = p.type
+            if p.count_type:
+                type_of[i, True] = p.count_type
+        codes = sorted(set(type_of.values()))
+        code = np.zeros(len(tokens), dtype=np.int64)  # index into codes of each token
+        for (i, count), t in type_of.items():
+            code[(prop == i) & (is_count == count)] = codes.index(t)
+        integer = np.array([_PLY_TYPES[t][0] in "iu" for t in codes])[code] if len(tokens) \
+            else np.zeros(0, dtype=bool)
+
+        def refuse(k: int, why: str | None = None) -> MeshError:
+            r, p = int(record[k]), el.props[int(prop[k])]
+            tok = tokens[k].decode("ascii")[:30]
+            what = f"a list length of '{p.name}'" if is_count[k] else f"property '{p.name}'"
+            if why is None:
+                why = (f"expected {'an integer' if integer[k] else 'a number'} in {what}, "
+                       f"got {tok!r}")
+            return self._fail(el, r, why, lines)
+
+        try:
+            values = np.array(tokens, dtype=np.float64) if tokens else np.zeros(0)
+        except ValueError:
+            for k, tok in enumerate(tokens):
+                try:
+                    float(tok)
+                except ValueError:
+                    raise refuse(k) from None
+            raise
+        def lengths_match(final: bool) -> None:
+            """Each list as long as its line says (before the type checks: where the
+            written length is a count at all; after them: everywhere)."""
+            for name, n in lengths.items():
+                i = next(i for i, p in enumerate(el.props) if p.name == name)
+                stated = values[(prop == i) & is_count]
+                bad = stated != n
+                if not final:
+                    bad &= (stated >= 0) & (stated == np.floor(stated))
+                if bad.any():
+                    r = int(np.argmax(bad))
+                    raise self._fail(el, r, f"a list of negative length {stated[r]:g}"
+                                     if stated[r] < 0 else
+                                     "the line ends early (a PLY record is one line)"
+                                     if stated[r] > n[r] else
+                                     "more numbers on the line than the header declares",
+                                     lines)
+
+        lengths_match(final=False)
+        if integer.any():
+            if integer.all():
+                plain = _NOT_INTEGER.search(self.body, *span) is None
+                ok = np.ones(len(tokens), dtype=bool) if plain else np.array(
+                    [_NOT_INTEGER.search(t) is None for t in tokens])
+            else:
+                ok = np.ones(len(tokens), dtype=bool)
+                sel = np.flatnonzero(integer)
+                ok[sel] = [_NOT_INTEGER.search(tokens[k]) is None for k in sel.tolist()]
+            if not ok.all():
+                raise refuse(int(np.argmin(ok)))
+        for c, t in enumerate(codes):
+            dt = np.dtype(_PLY_TYPES[t])
+            sel = code == c
+            if dt.kind in "iu":
+                info = np.iinfo(dt)
+                out = sel & ((values < info.min) | (values > info.max))
+                if out.any():
+                    k = int(np.argmax(out))
+                    raise refuse(k, f"{tokens[k].decode('ascii')[:30]} does not fit the "
+                                    f"PLY type '{t}' of "
+                                    + (f"a list length of '{el.props[int(prop[k])].name}'"
+                                       if is_count[k] else
+                                       f"property '{el.props[int(prop[k])].name}'"))
+            elif dt != np.float64 and sel.any():
+                with np.errstate(over="ignore"):
+                    values[sel] = values[sel].astype(dt)
+        lengths_match(final=True)
+        return values
+
+    def finish(self) -> None:
+        if self.next < len(self.records):
+            raise MeshError(self.path, "PLY file has data after its last element",
+                            self.header_lines + int(self.records[self.next]) + 1)
+
+
+def _ply_mesh(path: Path, elements: dict[str, _Columns], declared: dict[str, _Element],
+              flip: bool, where) -> MeshData:
+    """The mesh of a parsed PLY file: its 'vertex' and 'face' elements, checked, values
+    rounded to float32 as Mitsuba stores them."""
+    if "vertex" not in elements:
         raise MeshError(path, "PLY file has no 'vertex' element")
-    vert = values["vertex"]
+    vert = elements["vertex"]
     for c in "xyz":
-        if c not in vert:
+        if not isinstance(vert.get(c), np.ndarray):
             raise MeshError(path, f"PLY vertex element has no property '{c}'")
-    vertices = np.stack([vert[c] for c in "xyz"], axis=1).astype(np.float64)
-    if not np.isfinite(vertices).all():
-        bad = int(np.argmax(~np.isfinite(vertices).all(axis=1)))
-        raise MeshError(path, f"PLY vertex {bad} has a coordinate that is not finite")
+
+    def column_block(cols) -> np.ndarray:
+        return np.stack([np.asarray(vert[c], dtype=np.float64) for c in cols], axis=1)
+
+    def checked(cols, what, normal=False) -> np.ndarray:
+        a = column_block(cols)
+        bad = _first_bad(a, normal)
+        if bad is not None:
+            raise MeshError(path, f"PLY vertex {bad[0]}: the {what} {_show_row(a, bad[0])} "
+                                  f"{bad[1]}", where("vertex", bad[0]))
+        if all(vert[c].dtype == np.float32 for c in cols):
+            return a  # float32 values already
+        return a.astype(np.float32).astype(np.float64)
+
+    def scalar(name: str) -> bool:
+        return isinstance(vert.get(name), np.ndarray)
+
+    vertices = checked("xyz", "position")
     normals = uvs = None
-    if all(c in vert for c in ("nx", "ny", "nz")):
-        normals = _normalized(np.stack([vert[c] for c in ("nx", "ny", "nz")], axis=1))
-    # The texture-coordinate names Mitsuba's ply plugin accepts, in its order of preference.
-    for un, vn in (("u", "v"), ("texture_u", "texture_v"), ("s", "t")):
-        if un in vert and vn in vert:
-            uvs = np.stack([vert[un], vert[vn]], axis=1).astype(np.float64)
+    if all(scalar(c) for c in ("nx", "ny", "nz")):
+        normals = _normalized(checked(("nx", "ny", "nz"), "normal", normal=True))
+    for un, vn in _UV_NAMES:
+        if scalar(un) and scalar(vn):
+            uvs = checked((un, vn), "texture coordinate")
             if flip:
                 uvs[:, 1] = 1.0 - uvs[:, 1]
             break
 
-    face = values.get("face")
-    if face is None:
+    if "face" not in elements:
         raise MeshError(path, "the mesh has no faces (no 'face' element)")
-    key = next((k for k in ("vertex_index", "vertex_indices") if k in face), None)
+    face = elements["face"]
+    key = next((k for k in _INDEX_NAMES if isinstance(face.get(k), tuple)), None)
     if key is None:
         raise MeshError(path, "PLY face element has no 'vertex_indices' (or 'vertex_index') "
                               "list")
     counts, flat = face[key]
+    counts = np.asarray(counts, dtype=np.int64)
     if len(counts) and counts.min() < 3:
-        raise MeshError(path, f"PLY face {int(np.argmax(counts < 3))} has fewer than 3 "
-                              "vertices")
-    flat = flat.astype(np.int64)
-    bad = (flat < 0) | (flat >= len(vertices))
+        k = int(np.argmax(counts < 3))
+        raise MeshError(path, f"PLY face {k} has fewer than 3 vertices", where("face", k))
+
+    def face_of(i: int) -> int:
+        return int(np.searchsorted(np.cumsum(counts), i, side="right"))
+
+    item_type = next(p.type for p in declared["face"].props if p.name == key)
+    if _PLY_TYPES[item_type][0] == "f":  # a float index list: only integers name a vertex
+        bad = ~np.isfinite(flat) | (flat != np.floor(flat))
+        if bad.any():
+            i = int(np.argmax(bad))
+            raise MeshError(path, f"PLY face {face_of(i)} has a non-integer vertex index "
+                                  f"{float(flat[i]):g}", where("face", face_of(i)))
+    nv = len(vertices)
+    bad = (flat < 0) | (flat >= nv)
     if bad.any():
-        raise MeshError(path, f"bad index: face refers to vertex {int(flat[np.argmax(bad)])} "
-                              f"but the file has {len(vertices)} vertices (0-based)")
-    return MeshData(vertices, _fan(flat, counts), normals, uvs)
-
-
-class _BinaryBody:
-    """Reads the elements of a binary PLY body one after the other."""
-
-    def __init__(self, path: Path, data: bytes, offset: int, order: str):
-        self.path, self.data, self.offset, self.order = path, data, offset, order
-
-    def _need(self, nbytes: int, el: _Element) -> None:
-        if self.offset + nbytes > len(self.data):
-            raise MeshError(self.path, f"PLY file ends inside element '{el.name}'")
-
-    def element(self, el: _Element, keep: bool) -> dict:
-        o = self.order
-        if not any(p.count_dtype for p in el.props):
-            dt = np.dtype([(f"p{i}", o + p.dtype) for i, p in enumerate(el.props)])
-            self._need(dt.itemsize * el.count, el)
-            rec = np.frombuffer(self.data, dt, el.count, self.offset)
-            self.offset += dt.itemsize * el.count
-            return {p.name: rec[f"p{i}"] for i, p in enumerate(el.props)} if keep else {}
-        # Lists: first assume every list has the length of the first record's list
-        # (true of triangle or quad meshes), read all records at once and check that.
-        fast = self._uniform(el, keep)
-        if fast is not None:
-            return fast
-        return self._walk(el, keep)
-
-    def _first_counts(self, el: _Element) -> list[int] | None:
-        off, out = self.offset, []
-        for p in el.props:
-            if p.count_dtype:
-                size = np.dtype(p.count_dtype).itemsize
-                if off + size > len(self.data):
-                    return None
-                n = int(np.frombuffer(self.data, self.order + p.count_dtype, 1, off)[0])
-                out.append(n)
-                off += size + n * np.dtype(p.dtype).itemsize
-            else:
-                off += np.dtype(p.dtype).itemsize
-        return out
-
-    def _uniform(self, el: _Element, keep: bool) -> dict | None:
-        if el.count == 0:
-            return {p.name: (np.zeros(0, np.int64), np.zeros(0)) if p.count_dtype
-                    else np.zeros(0) for p in el.props}
-        first = self._first_counts(el)
-        if first is None or min(first) < 0:
-            return None
-        o, fields, k = self.order, [], 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                fields += [(f"c{i}", o + p.count_dtype)]
-                if first[k]:
-                    fields += [(f"p{i}", o + p.dtype, (first[k],))]
-                k += 1
-            else:
-                fields += [(f"p{i}", o + p.dtype)]
-        dt = np.dtype(fields)
-        if self.offset + dt.itemsize * el.count > len(self.data):
-            return None
-        rec = np.frombuffer(self.data, dt, el.count, self.offset)
-        k = 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                if np.any(rec[f"c{i}"] != first[k]):
-                    return None
-                k += 1
-        self.offset += dt.itemsize * el.count
-        if not keep:
-            return {}
-        out, k = {}, 0
-        for i, p in enumerate(el.props):
-            if p.count_dtype:
-                n = first[k]
-                k += 1
-                flat = rec[f"p{i}"].reshape(-1) if n else np.zeros(0, p.dtype)
-                out[p.name] = (np.full(el.count, n, np.int64), flat)
-            else:
-                out[p.name] = rec[f"p{i}"]
-        return out
-
-    def _walk(self, el: _Element, keep: bool) -> dict:
-        """Record by record, for lists of varying length (polygon meshes of mixed degree)."""
-        cols: dict[str, list] = {p.name: [] for p in el.props}
-        lens: dict[str, list] = {p.name: [] for p in el.props if p.count_dtype}
-        data, o = self.data, self.order
-        sizes = [(np.dtype(p.dtype).itemsize,
-                  np.dtype(p.count_dtype).itemsize if p.count_dtype else 0) for p in el.props]
-        off = self.offset
-        for _ in range(el.count):
-            for p, (size, csize) in zip(el.props, sizes, strict=True):
-                if p.count_dtype:
-                    self.offset = off
-                    self._need(csize, el)
-                    n = int(np.frombuffer(data, o + p.count_dtype, 1, off)[0])
-                    off += csize
-                    if n < 0:
-                        raise MeshError(self.path, f"negative list length in '{el.name}'")
-                    self.offset = off
-                    self._need(n * size, el)
-                    if keep:
-                        cols[p.name].append(np.frombuffer(data, o + p.dtype, n, off))
-                        lens[p.name].append(n)
-                    off += n * size
-                else:
-                    self.offset = off
-                    self._need(size, el)
-                    if keep:
-                        cols[p.name].append(np.frombuffer(data, o + p.dtype, 1, off))
-                    off += size
-        self.offset = off
-        if not keep:
-            return {}
-        out = {}
-        for p in el.props:
-            flat = np.concatenate(cols[p.name]) if cols[p.name] else np.zeros(0, p.dtype)
-            out[p.name] = (np.asarray(lens[p.name], np.int64), flat) if p.count_dtype else flat
-        return out
-
-    def finish(self) -> None:
-        # Mitsuba refuses trailing bytes too; a few newline bytes some writers append are fine.
-        if self.data[self.offset:].strip(b"\r\n\x00 "):
-            raise MeshError(self.path, "PLY file has data after its last element")
-
-
-class _AsciiBody:
-    """Reads the elements of an ascii PLY body from its whitespace-separated tokens."""
-
-    def __init__(self, path: Path, body: bytes, header_lines: int):
-        self.path, self.body, self.header_lines = path, body, header_lines
-        self.tokens = body.split()
-        self.pos = 0
-
-    def _numbers(self, n: int, el: _Element) -> np.ndarray:
-        if self.pos + n > len(self.tokens):
-            raise MeshError(self.path, f"PLY file ends inside element '{el.name}'")
-        chunk = self.tokens[self.pos:self.pos + n]
-        try:
-            out = np.array(chunk, dtype=np.float64) if n else np.zeros(0)
-        except ValueError:
-            bad = next(i for i, t in enumerate(chunk) if not _is_number(t))
-            raise MeshError(self.path, f"expected a number in element '{el.name}', got "
-                                       f"{chunk[bad].decode('latin-1')[:30]!r}",
-                            self._line_of(self.pos + bad)) from None
-        self.pos += n
-        return out
-
-    def _line_of(self, token: int) -> int:
-        """Line number (of the whole file) of the token with this index, for messages."""
-        header_lines = self.header_lines
-        count = 0
-        for i, line in enumerate(self.body.splitlines(), start=1):
-            count += len(line.split())
-            if count > token:
-                return header_lines + i
-        return header_lines + len(self.body.splitlines())
-
-    def element(self, el: _Element, keep: bool) -> dict:
-        n_props = len(el.props)
-        if not any(p.count_dtype for p in el.props):
-            rec = self._numbers(el.count * n_props, el).reshape(el.count, n_props)
-            return {p.name: rec[:, i] for i, p in enumerate(el.props)} if keep else {}
-        # Try: all lists as long as the first record's (one record = fixed token count).
-        uniform = self._uniform(el)
-        if uniform is not None:
-            width, list_at = uniform
-            rec = self._numbers(el.count * width, el).reshape(el.count, width)
-            out = {}
-            for p, (start, n) in zip(el.props, list_at, strict=True):
-                if p.count_dtype:
-                    if np.any(rec[:, start] != n):
-                        self.pos -= el.count * width
-                        return self._walk(el, keep)
-                    out[p.name] = (np.full(el.count, n, np.int64),
-                                   rec[:, start + 1:start + 1 + n].reshape(-1))
-                else:
-                    out[p.name] = rec[:, start]
-            return out if keep else {}
-        return self._walk(el, keep)
-
-    def _uniform(self, el: _Element) -> tuple[int, list[tuple[int, int]]] | None:
-        pos, at, width = self.pos, [], 0
-        for p in el.props:
-            if p.count_dtype:
-                if pos >= len(self.tokens) or not self.tokens[pos].isdigit():
-                    return None
-                n = int(self.tokens[pos])
-                at.append((width, n))
-                width += 1 + n
-                pos += 1 + n
-            else:
-                at.append((width, 1))
-                width += 1
-                pos += 1
-        if el.count == 0 or self.pos + width * el.count > len(self.tokens):
-            return None
-        return width, at
-
-    def _walk(self, el: _Element, keep: bool) -> dict:
-        cols: dict[str, list] = {p.name: [] for p in el.props}
-        lens: dict[str, list] = {p.name: [] for p in el.props if p.count_dtype}
-        for _ in range(el.count):
-            for p in el.props:
-                if p.count_dtype:
-                    n = self._numbers(1, el)[0]
-                    if n < 0 or n != int(n):
-                        raise MeshError(self.path, f"bad list length {n} in '{el.name}'",
-                                        self._line_of(self.pos - 1))
-                    cols[p.name].append(self._numbers(int(n), el))
-                    lens[p.name].append(int(n))
-                else:
-                    cols[p.name].append(self._numbers(1, el))
-        if not keep:
-            return {}
-        out = {}
-        for p in el.props:
-            flat = np.concatenate(cols[p.name]) if cols[p.name] else np.zeros(0)
-            out[p.name] = (np.asarray(lens[p.name], np.int64), flat) if p.count_dtype else flat
-        return out
-
-    def finish(self) -> None:
-        if self.pos != len(self.tokens):
-            raise MeshError(self.path, "PLY file has data after its last element",
-                            self._line_of(self.pos))
-
-
-def _is_number(token: bytes) -> bool:
-    try:
-        float(token)
-    except ValueError:
-        return False
-    return True
+        i = int(np.argmax(bad))
+        raise MeshError(path, f"bad index: face {face_of(i)} refers to vertex "
+                              f"{flat[i]:g} but the file has {nv} vertices (0-based)",
+                        where("face", face_of(i)))
+    return MeshData(vertices, _fan(flat.astype(np.int64), counts), normals, uvs)
 
 
 if __name__ == "__main__":  # pragma: no cover - a quick look at a file

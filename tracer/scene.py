@@ -940,7 +940,7 @@ def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh
 
     name = t.string("file")
     path = Path(name) if Path(name).is_absolute() else base / name
-    if not path.is_file():
+    if not path.exists():  # a FIFO, device or folder: load_mesh says what it is
         t.fail("file", f"no such mesh file: {path}")
     smooth = t.raw("smooth", True)
     if not isinstance(smooth, bool):
