@@ -200,8 +200,13 @@ def test_bad_new_shapes_name_their_key(shapes, key, words):
     ("type='phong'\nmodel='cook-torrance'\n", "materials.p.model", "blinn-phong"),
     ("type='diffuse'\nreflectance={checkerboard={color0=0.5,scale=-1}}\n",
      "materials.p.reflectance.checkerboard.scale", "positive"),
-    ("type='diffuse'\nreflectance={marble={}}\n", "materials.p.reflectance.checkerboard",
-     "missing"),
+    # An unknown texture kind is named as such, at its own key (not "checkerboard: missing").
+    ("type='diffuse'\nreflectance={marble={}}\n", "materials.p.reflectance.marble",
+     "unknown texture (expected one of: checkerboard)"),
+    ("type='diffuse'\nreflectance={bitmap={filename='t.png'}}\n",
+     "materials.p.reflectance.bitmap", "unknown texture (expected one of: checkerboard)"),
+    ("type='diffuse'\nreflectance={}\n", "materials.p.reflectance",
+     "expected exactly one of checkerboard in a texture, got none"),
 ])
 def test_bad_new_materials_name_their_key(material, key, words):
     text = "[camera]\norigin=[0,0,5]\ntarget=[0,0,0]\n[materials.p]\n" + material

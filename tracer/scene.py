@@ -346,43 +346,63 @@ class _Table:
     def has(self, key: str) -> bool:
         return key in self.data
 
-    def raw(self, key: str, default: Any = ..., required_what: str = "a value") -> Any:
+    def raw(self, key: str, default: Any = ..., required_what: str = "a value",
+            schema: dict | None = None) -> Any:
+        """The value of ``key`` as TOML gave it (``default`` when absent, ``...``: required).
+
+        ``schema`` is the JSON Schema of the values the caller accepts: the
+        helpers below pass their own, and :mod:`tracer.schema` builds the scene
+        format's schema from them (this table ignores it).
+        """
         self.used.add(key)
         if key not in self.data:
             if default is ...:
-                self.fail(key, f"missing; expected {required_what}")
+                self.fail(key, f"missing; expected {required_what}" + self._unread_note())
             return default
         return self.data[key]
+
+    def _unread_note(self) -> str:
+        """The keys of this table not read so far, for a message about a missing one."""
+        unread = [k for k in self.data if k not in self.used]
+        return f" (this table has: {', '.join(unread)})" if unread else ""
 
     def number(self, key: str, default: Any = ..., lo: float | None = None,
                hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> float:
         what = _range_text("a number", lo, hi, lo_open, hi_open)
-        v = self.raw(key, default, what)
+        v = self.raw(key, default, what, _number_schema(lo, hi, lo_open, hi_open))
         return _check_number(self, key, v, what, lo, hi, lo_open, hi_open)
 
     def integer(self, key: str, default: Any = ..., lo: int | None = None) -> int:
         what = "an integer" + (f" >= {lo}" if lo is not None else "")
-        v = self.raw(key, default, what)
+        v = self.raw(key, default, what,
+                     {"type": "integer"} | ({"minimum": lo} if lo is not None else {}))
         if isinstance(v, bool) or not isinstance(v, int):
             self.fail(key, f"expected {what}, got {_show(v)}")
         if lo is not None and v < lo:
             self.fail(key, f"expected {what}, got {v}")
         return v
 
+    def boolean(self, key: str, default: Any = ...) -> bool:
+        v = self.raw(key, default, "true or false", {"type": "boolean"})
+        if not isinstance(v, bool):
+            self.fail(key, f"expected true or false, got {_show(v)}")
+        return v
+
     def string(self, key: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
         what = "a string" if not choices else "one of: " + ", ".join(f'"{c}"' for c in choices)
-        v = self.raw(key, default, what)
+        v = self.raw(key, default, what,
+                     {"enum": list(choices)} if choices else {"type": "string"})
         if not isinstance(v, str) or (choices and v not in choices):
             self.fail(key, f"expected {what}, got {_show(v)}")
         return v
 
     def vec3(self, key: str, default: Any = ..., nonzero: bool = False) -> Vec3:
-        v = self.raw(key, default, "a list of 3 numbers")
+        v = self.raw(key, default, "a list of 3 numbers", _VEC3_SCHEMA)
         return _vec3(self, key, v, nonzero)
 
     def direction(self, key: str, default: Any = ...) -> Vec3:
         """A unit vector from a non-zero one (non-zero in float32)."""
-        return _unit(self, key, self.raw(key, default, "a list of 3 numbers"))
+        return _unit(self, key, self.raw(key, default, "a list of 3 numbers", _VEC3_SCHEMA))
 
     def distinct(self, key: str, a: Vec3, b: Vec3, other: str) -> None:
         """Refuse b unless float32 tells it apart from a (see :func:`_distinct`)."""
@@ -391,7 +411,9 @@ class _Table:
     def color(self, key: str, default: Any = ..., hi: float | None = None) -> Color:
         what = "a colour: one number or a list of 3 numbers, each >= 0" + (
             f" and <= {hi}" if hi is not None else "")
-        v = self.raw(key, default, what)
+        one = _number_schema(0, hi, False, False)
+        v = self.raw(key, default, what, {"anyOf": [
+            one, {"type": "array", "items": one, "minItems": 3, "maxItems": 3}]})
         if isinstance(v, (int, float)) and not isinstance(v, bool):
             v = [v, v, v]
         if not isinstance(v, list) or len(v) != 3:
@@ -408,9 +430,40 @@ class _Table:
             out.append(float(x))
         return (out[0], out[1], out[2])
 
-    def table(self, key: str, default: Any = ...) -> _Table:
-        v = self.raw(key, default, "a table")
-        return _Table(self.path, self._k(key), v)
+    def table(self, key: str, default: Any = ..., parse: Any = None) -> Any:
+        """The sub-table ``key``; with ``parse``, what ``parse(sub-table)`` makes of it."""
+        v = self.raw(key, default, "a table", {"type": "object"})
+        sub = _Table(self.path, self._k(key), v)
+        return sub if parse is None else parse(sub)
+
+    def tables(self, key: str, parse: Any, what: str | None = None,
+               item_what: str = "a table") -> list:
+        """An array of tables (``[[key]]``), each made into ``parse(sub-table)``."""
+        what = what or f"an array of tables ([[{key}]])"
+        v = self.raw(key, [], what, {"type": "array"})
+        if not isinstance(v, list):
+            self.fail(key, f"expected {what}, got {_show(v)}")
+        return [parse(_Table(self.path, f"{self._k(key)}[{i}]", x, item_what))
+                for i, x in enumerate(v)]
+
+    def each(self, parse: Any) -> dict:
+        """Every key of this table, each a sub-table named by the user: ``parse(sub, name)``."""
+        return {name: parse(self.table(name), name) for name in list(self.data)}
+
+    def is_table(self, key: str) -> bool:
+        """Whether ``key`` holds a table (a texture rather than a colour, say)."""
+        return isinstance(self.data.get(key), dict)
+
+    def choose(self, options: tuple[str, ...], noun: str) -> str:
+        """The one key of this table, which names which of ``options`` it is (a step's
+        ``translate``, a texture's ``checkerboard``)."""
+        keys = list(self.data)
+        if len(keys) != 1:
+            self.fail("", f"expected exactly one of {', '.join(options)} in a {noun}, "
+                          f"got {', '.join(keys) or 'none'}")
+        if keys[0] not in options:
+            self.fail(keys[0], f"unknown {noun} (expected one of: {', '.join(options)})")
+        return keys[0]
 
     def finish(self, allowed_note: str = ""):
         """Refuse keys that were never read: a typo must not be silently ignored."""
@@ -438,6 +491,19 @@ def _show(v: Any, depth: int = 0) -> str:
         more = f", ... ({len(v):,} elements)" if len(v) > 6 else ""
         return "[" + ", ".join(items) + more + "]"
     return repr(v)
+
+
+def _number_schema(lo, hi, lo_open, hi_open) -> dict:
+    """The JSON Schema of the numbers ``_range_text`` describes."""
+    out: dict = {"type": "number"}
+    if lo is not None:
+        out["exclusiveMinimum" if lo_open else "minimum"] = lo
+    if hi is not None:
+        out["exclusiveMaximum" if hi_open else "maximum"] = hi
+    return out
+
+
+_VEC3_SCHEMA = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
 
 
 def _range_text(base: str, lo, hi, lo_open, hi_open) -> str:
@@ -644,49 +710,50 @@ def load_scene(path: str | Path) -> Scene:
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     """Validate an already parsed TOML document (see :func:`load_scene`)."""
     _check_nesting(path, data)
-    top = _Table(path, "", data)
+    return _parse_top(_Table(path, "", data))
+
+
+def _parse_top(top: _Table) -> Scene:
+    """The whole document (also run by :mod:`tracer.schema` to derive the format's schema)."""
     description = top.string("description", "")
-    film = _parse_film(top.table("film", {}))
-    camera = _parse_camera(top.table("camera"))
-
-    mats_t = top.table("materials", {})
-    materials: dict[str, Material] = {}
-    for name in list(mats_t.data):
-        materials[name] = _parse_material(mats_t.table(name), name)
-    mats_t.finish()
-
-    lights = tuple(_parse_light(t) for t in _array_of_tables(top, "lights"))
-    base = Path(path).parent
-    groups_t = top.table("groups", {})
-    groups: dict[str, tuple] = {}
-    for gname in list(groups_t.data):
-        g = groups_t.table(gname)
-        members = _array_of_tables(g, "shapes")
-        if not members:
-            g.fail("shapes", "expected at least one [[groups.NAME.shapes]] table")
-        groups[gname] = tuple(_parse_shape(m, materials, {}, base, in_group=True)
-                              for m in members)
-        g.finish()
-    groups_t.finish()
-    shapes_t = _array_of_tables(top, "shapes")
-    shapes = tuple(_parse_shape(t, materials, groups, base) for t in shapes_t)
-    cmp_t = top.table("compare", {})
-    tracer_only = cmp_t.raw("tracer_only", [])
-    if not isinstance(tracer_only, list) or any(x not in TRACER_ONLY for x in tracer_only):
-        cmp_t.fail("tracer_only", "expected a list of: " + ", ".join(f'"{x}"' for x in TRACER_ONLY)
-                   + f", got {_show(tracer_only)}")
-    cmp_t.finish()
+    film = top.table("film", {}, parse=_parse_film)
+    camera = top.table("camera", parse=_parse_camera)
+    materials: dict[str, Material] = top.table("materials", {}, parse=_parse_materials)
+    lights = tuple(top.tables("lights", _parse_light))
+    base = Path(top.path).parent
+    groups: dict[str, tuple] = top.table(
+        "groups", {}, parse=lambda g: _parse_groups(g, materials, base))
+    shapes = tuple(top.tables("shapes", lambda t: _parse_shape(t, materials, groups, base)))
+    tracer_only = top.table("compare", {}, parse=_parse_compare)
     top.finish()
-    return Scene(path=path, film=film, camera=camera, materials=materials, lights=lights,
+    return Scene(path=top.path, film=film, camera=camera, materials=materials, lights=lights,
                  shapes=shapes, description=description, tracer_only=tuple(tracer_only),
                  groups=groups)
 
 
-def _array_of_tables(top: _Table, key: str) -> list[_Table]:
-    v = top.raw(key, [])
-    if not isinstance(v, list):
-        top.fail(key, f"expected an array of tables ([[{key}]]), got {_show(v)}")
-    return [_Table(top.path, f"{top._k(key)}[{i}]", x) for i, x in enumerate(v)]
+def _parse_materials(t: _Table) -> dict[str, Material]:
+    return t.each(_parse_material)
+
+
+def _parse_groups(t: _Table, materials: dict[str, Material], base: Path) -> dict[str, tuple]:
+    def group(g: _Table, name: str) -> tuple:
+        members = g.tables("shapes", lambda m: _parse_shape(m, materials, {}, base,
+                                                            in_group=True))
+        if not members:
+            g.fail("shapes", "expected at least one [[groups.NAME.shapes]] table")
+        g.finish()
+        return tuple(members)
+    return t.each(group)
+
+
+def _parse_compare(t: _Table) -> list[str]:
+    what = "a list of: " + ", ".join(f'"{x}"' for x in TRACER_ONLY)
+    tracer_only = t.raw("tracer_only", [], what,
+                        {"type": "array", "items": {"enum": list(TRACER_ONLY)}})
+    if not isinstance(tracer_only, list) or any(x not in TRACER_ONLY for x in tracer_only):
+        t.fail("tracer_only", f"expected {what}, got {_show(tracer_only)}")
+    t.finish()
+    return tracer_only
 
 
 def _parse_film(t: _Table) -> Film:
@@ -732,7 +799,9 @@ def _parse_camera(t: _Table) -> Camera:
 def _pixel_offset(t: _Table) -> tuple[float, float]:
     """``pixel_offset = [dx, dy]``: the pixel grid's samples moved by (dx, dy) pixels."""
     what = "[dx, dy]: two numbers from -1 to 1 (pixels)"
-    v = t.raw("pixel_offset", [0.0, 0.0], what)
+    one = {"type": "number", "minimum": -1, "maximum": 1}
+    v = t.raw("pixel_offset", [0.0, 0.0], what,
+              {"type": "array", "items": one, "minItems": 2, "maxItems": 2})
     if (not isinstance(v, list) or len(v) != 2 or
             any(isinstance(x, bool) or not isinstance(x, (int, float)) or
                 not math.isfinite(x) or abs(x) > 1 for x in v)):
@@ -751,6 +820,12 @@ def _parse_material(t: _Table, name: str) -> Material:
     return m
 
 
+def _parse_emitter(t: _Table) -> AreaEmitter:
+    emitter = _area.parse(t)
+    t.finish()
+    return emitter
+
+
 def _parse_light(t: _Table) -> Light:
     kind = t.string("type", choices=tuple(_emitters.LIGHTS))
     light = _emitters.LIGHTS[kind].parse(t)
@@ -758,54 +833,54 @@ def _parse_light(t: _Table) -> Light:
     return light
 
 
+#: The kinds of a ``to_world`` step, each the one key of its table.
+STEPS = ("translate", "scale", "rotate", "matrix")
+
+
 def _parse_steps(t: _Table, key: str) -> np.ndarray:
-    steps = t.raw(key, [])
-    if not isinstance(steps, list):
-        t.fail(key, "expected a list of steps like [{ translate = [x, y, z] }], "
-                    f"got {_show(steps)}")
-    mats = []
-    for i, step in enumerate(steps):
-        s = _Table(t.path, f"{t._k(key)}[{i}]", step,
-                   "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
-                   "{ matrix = [[..] x4] }")
-        if len(step) != 1:
-            s.fail("", f"expected exactly one of translate, scale, rotate, matrix in a step, "
-                       f"got {', '.join(step) or 'none'}")
-        op = next(iter(step))
-        if op == "translate":
-            mats.append(tf.translate(s.vec3("translate")))
-        elif op == "scale":
-            v = s.raw("scale")
-            if isinstance(v, (int, float)) and not isinstance(v, bool):
-                v = [v, v, v]
-            sv = _vec3(s, "scale", v)
-            if any(abs(x) < FLOAT32_TINY for x in sv):
-                s.fail("scale", f"expected non-zero scale factors, got {_show(v)} "
-                                "(a factor is zero in float32)")
-            mats.append(tf.scale(sv))
-        elif op == "rotate":
-            r = s.table("rotate")
-            axis = _unit(r, "axis", r.raw("axis", ..., "a list of 3 numbers"))
-            mats.append(tf.rotate(axis, r.number("angle")))
-            r.finish()
-        elif op == "matrix":
-            v = s.raw("matrix")
-            if (not isinstance(v, list) or len(v) != 4 or
-                    any(not isinstance(row, list) or len(row) != 4 for row in v)):
-                s.fail("matrix", "expected 4 rows of 4 numbers")
-            flat = [x for row in v for x in row]
-            if any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-                   for x in flat):
-                s.fail("matrix", "expected 4 rows of 4 finite numbers")
-            m = np.asarray(v, dtype=np.float64)
-            if not np.allclose(m[3], [0, 0, 0, 1]):
-                s.fail("matrix", "expected an affine matrix (last row [0, 0, 0, 1])")
-            mats.append(m)
-        else:
-            s.fail(op, "unknown step (expected one of: translate, scale, rotate, matrix)")
-        s.finish()
+    mats = t.tables(key, _parse_step,
+                    "a list of steps like [{ translate = [x, y, z] }]",
+                    "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
+                    "{ matrix = [[..] x4] }")
     m = tf.compose(mats)
     _check_transform(t, key, m)
+    return m
+
+
+def _parse_step(s: _Table) -> np.ndarray:
+    op = s.choose(STEPS, "step")
+    if op == "translate":
+        m = tf.translate(s.vec3("translate"))
+    elif op == "scale":
+        v = s.raw("scale", ..., "a number or a list of 3 numbers",
+                  {"anyOf": [{"type": "number"}, _VEC3_SCHEMA]})
+        if isinstance(v, (int, float)) and not isinstance(v, bool):
+            v = [v, v, v]
+        sv = _vec3(s, "scale", v)
+        if any(abs(x) < FLOAT32_TINY for x in sv):
+            s.fail("scale", f"expected non-zero scale factors, got {_show(v)} "
+                            "(a factor is zero in float32)")
+        m = tf.scale(sv)
+    elif op == "rotate":
+        r = s.table("rotate")
+        axis = r.direction("axis")
+        m = tf.rotate(axis, r.number("angle"))
+        r.finish()
+    else:
+        row = {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4}
+        v = s.raw("matrix", ..., "4 rows of 4 numbers",
+                  {"type": "array", "items": row, "minItems": 4, "maxItems": 4})
+        if (not isinstance(v, list) or len(v) != 4 or
+                any(not isinstance(row, list) or len(row) != 4 for row in v)):
+            s.fail("matrix", "expected 4 rows of 4 numbers")
+        flat = [x for row in v for x in row]
+        if any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+               for x in flat):
+            s.fail("matrix", "expected 4 rows of 4 finite numbers")
+        m = np.asarray(v, dtype=np.float64)
+        if not np.allclose(m[3], [0, 0, 0, 1]):
+            s.fail("matrix", "expected an affine matrix (last row [0, 0, 0, 1])")
+    s.finish()
     return m
 
 
@@ -823,9 +898,7 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
         if kind not in _area.SAMPLERS or in_group:
             t.fail("emitter", "area lights are supported on " + ", ".join(_area.SAMPLERS) +
                    (" outside groups" if in_group else "") + f", not on a {kind}")
-        e = t.table("emitter")
-        emitter = _area.parse(e)
-        e.finish()
+        emitter = t.table("emitter", parse=_parse_emitter)
     if kind == "instance":
         material = None
         group = t.string("group")
@@ -908,7 +981,8 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
 def _points(t: _Table, key: str, m: np.ndarray, exactly: int | None = None) -> list:
     what = (f"a list of {exactly} vertices [[x, y, z], ...]" if exactly
             else "a list of at least 3 vertices [[x, y, z], ...]")
-    v = t.raw(key, ..., what)
+    counts = {"minItems": exactly, "maxItems": exactly} if exactly else {"minItems": 3}
+    v = t.raw(key, ..., what, {"type": "array", "items": _VEC3_SCHEMA} | counts)
     if not isinstance(v, list) or (len(v) != exactly if exactly else len(v) < 3):
         got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
         t.fail(key, f"expected {what}, got {got}")
@@ -942,9 +1016,7 @@ def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh
     path = Path(name) if Path(name).is_absolute() else base / name
     if not path.exists():  # a FIFO, device or folder: load_mesh says what it is
         t.fail("file", f"no such mesh file: {path}")
-    smooth = t.raw("smooth", True)
-    if not isinstance(smooth, bool):
-        t.fail("smooth", f"expected true or false, got {_show(smooth)}")
+    smooth = t.boolean("smooth", True)
     try:
         data = load_mesh(path)
     except MeshError as e:

@@ -49,26 +49,40 @@ def texture_max(t: Texture) -> float:
 
 
 def parse_texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Texture:
-    """A colour, or ``{ checkerboard = { color0, color1, scale } }``."""
+    """A colour, or a texture: a table whose one key names its kind (:data:`TEXTURES`),
+    e.g. ``{ checkerboard = { color0, color1, scale } }``."""
+    if not t.is_table(key):
+        return t.color(key, default, hi=hi)
+    tex = t.table(key)
+    kind = tex.choose(tuple(TEXTURES), "texture")
+    texture = TEXTURES[kind](tex.table(kind), hi)
+    tex.finish()
+    return texture
+
+
+def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
     from tracer.scene import _show
 
-    v = t.raw(key, default, "a colour or { checkerboard = {...} }")
-    if isinstance(v, dict):
-        tex = t.table(key)
-        cb = tex.table("checkerboard")
-        sc = cb.raw("scale", 1.0)
-        if isinstance(sc, (int, float)) and not isinstance(sc, bool):
-            sc = [sc, sc]
-        if (not isinstance(sc, list) or len(sc) != 2 or
-                any(isinstance(x, bool) or not isinstance(x, (int, float)) or
-                    not math.isfinite(x) or x <= 0 for x in sc)):
-            cb.fail("scale", f"expected a positive number or [su, sv], got {_show(sc)}")
-        board = Checkerboard(cb.color("color0", 0.4, hi=hi), cb.color("color1", 0.2, hi=hi),
-                             (float(sc[0]), float(sc[1])))
-        cb.finish()
-        tex.finish(" (textures: checkerboard)")
-        return board
-    return t.color(key, default, hi=hi)
+    what = "a positive number or [su, sv]"
+    positive = {"type": "number", "exclusiveMinimum": 0}
+    sc = cb.raw("scale", 1.0, what, {"anyOf": [
+        positive, {"type": "array", "items": positive, "minItems": 2, "maxItems": 2}]})
+    if isinstance(sc, (int, float)) and not isinstance(sc, bool):
+        sc = [sc, sc]
+    if (not isinstance(sc, list) or len(sc) != 2 or
+            any(isinstance(x, bool) or not isinstance(x, (int, float)) or
+                not math.isfinite(x) or x <= 0 for x in sc)):
+        cb.fail("scale", f"expected {what}, got {_show(sc)}")
+    board = Checkerboard(cb.color("color0", 0.4, hi=hi), cb.color("color1", 0.2, hi=hi),
+                         (float(sc[0]), float(sc[1])))
+    cb.finish()
+    return board
+
+
+#: Texture kinds: the key that names each in TOML -> its parser (sub-table, highest value).
+TEXTURES = {
+    "checkerboard": _parse_checkerboard,
+}
 
 
 class TextureTable:
