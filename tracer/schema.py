@@ -1,0 +1,350 @@
+"""The JSON Schema of the TOML scene format, derived from the loader itself.
+
+:func:`scene_schema` runs the loader's own parsers (``tracer/scene.py`` and
+every kind's ``parse`` in ``tracer/materials/`` and ``tracer/emitters/``) on a
+*recording* table, :class:`_Recorder`, instead of a scene. Each key a parser
+reads goes through one of the ``_Table`` helpers (``number``, ``color``,
+``vec3``, ``string``, ``table``, ...), and each helper hands
+``_Table.raw`` the JSON Schema of the values it accepts; the recorder notes
+the key, that schema, its default and whether it was required, and answers
+with a plausible value so that the parser goes on to its next key. Where a
+parser branches (on a ``type``, on whether a key is present, on a colour
+against a texture, on which kind of ``to_world`` step), the recorder takes
+each branch in turn, re-running the parser until every combination of its
+answers has been seen. The runs are merged into one schema: the keys read in
+any run of a table are its properties, the keys read without a default in
+every run are required, and runs that chose different ``type``s become the
+variants of a ``oneOf``, each with ``type`` as its constant.
+
+So there is no second list of keys: a kind that reads a new key appears in
+the schema as soon as its parser reads it. The schema is laxer than the
+loader where a rule ties keys or values together (a spot's ``beam_width``
+at most its ``cutoff_angle``, Phong's diffuse + specular <= 1, float32's
+range, a material name that must be defined): the loader stays the judge of
+a scene, the schema serves editors (completion, inline errors on keys and
+types). ``whitted schema`` prints it; docs/scene-format.md shows how an
+editor uses it.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from tracer import scene as _scene
+
+#: Where the schema says it lives (its ``$id``); docs/scene-format.md.
+SCHEMA_ID = "https://whitted.invalid/scene-format.schema.json"
+#: The most runs of one parser while exploring its branches: far above what the kinds
+#: need (a shape takes 36), a guard against a parser whose branches multiply.
+MAX_RUNS = 4096
+
+
+class _Run:
+    """One run of a parser: the answers given at its branch points (a depth-first walk)."""
+
+    def __init__(self, script: list[int]):
+        self.script = script
+        self.trace: list[tuple[int, int]] = []  # (number of answers, the one given)
+        self.rng = np.random.default_rng(len(script) + 1)
+
+    def decide(self, n: int) -> int:
+        i = len(self.trace)
+        choice = self.script[i] if i < len(self.script) else 0
+        self.trace.append((n, choice))
+        return choice
+
+    def next_script(self) -> list[int] | None:
+        """The answers of the next run: the last branch point with an answer left, advanced."""
+        trace = list(self.trace)
+        while trace and trace[-1][1] + 1 >= trace[-1][0]:
+            trace.pop()
+        if not trace:
+            return None
+        return [c for _, c in trace[:-1]] + [trace[-1][1] + 1]
+
+
+class _Sample(float):
+    """A number the recorder made up (or a default it returned): whatever is computed from
+    it stays one, so that a bound or a default that depends on another key (a spot's
+    ``beam_width`` at most its ``cutoff_angle``) is told from a fixed one."""
+
+
+def _sample_op(name):
+    op = getattr(float, name)
+    return lambda a, *b: _wrap(op(a, *b))
+
+
+def _wrap(x):
+    return _Sample(x) if isinstance(x, float) and not isinstance(x, _Sample) else x
+
+
+for _name in ("__add__", "__radd__", "__sub__", "__rsub__", "__mul__", "__rmul__",
+              "__truediv__", "__rtruediv__", "__neg__", "__pow__", "__rpow__"):
+    setattr(_Sample, _name, _sample_op(_name))
+
+#: JSON Schema words whose value may be a bound taken from another key.
+_BOUNDS = ("minimum", "maximum", "exclusiveMinimum", "exclusiveMaximum")
+
+
+class _Record:
+    """What one run read of one table."""
+
+    def __init__(self):
+        self.props: dict[str, list] = {}      # key -> specs (see _Recorder._note)
+        self.required: list[str] = []
+        self.present: set[str] = set()        # keys a branch point assumed present
+        self.discriminant: str | None = None  # the ``type`` this run chose
+        self.named: list[_Record] | None = None  # tables of user-chosen names (each)
+        self.exactly_one = False                 # choose(): one key names the kind
+
+
+def _explore(parse, make) -> tuple[list[_Record], Any]:
+    """Run ``parse`` on fresh recorders (``make(run)``) until every branch was taken.
+
+    Returns each run's record and the value of the first run that finished.
+    """
+    records, value, script = [], None, []
+    for _ in range(MAX_RUNS):
+        run = _Run(script)
+        t = make(run)
+        with np.errstate(all="ignore"):
+            try:
+                v = parse(t)
+                if value is None:
+                    value = v
+            except Exception:  # noqa: BLE001 - a plausible value can still fail a later
+                pass           # check; every key up to there is recorded
+        records.append(t.record)
+        script = run.next_script()
+        if script is None:
+            return records, value
+    raise RuntimeError(f"a parser branches more than {MAX_RUNS} ways; see tracer/schema.py")
+
+
+class _Recorder(_scene._Table):
+    """A ``_Table`` that records what is read of it instead of reading a scene."""
+
+    def __init__(self, run: _Run, path: str = "<schema>", key: str = ""):
+        self.path, self.key, self.run = path, key, run
+        self.data: dict = {}
+        self.used: set[str] = set()
+        self.record = _Record()
+        self.answers: dict[str, bool] = {}
+
+    def _note(self, key: str, spec: Any, required: bool) -> None:
+        self.used.add(key)
+        self.record.props.setdefault(key, []).append(spec)
+        if required and key not in self.record.present and key not in self.record.required:
+            self.record.required.append(key)
+
+    # -- what the helpers read
+
+    def raw(self, key, default=..., required_what="a value", schema=None):
+        spec = dict(schema or {})
+        spec["description"] = "expected " + required_what
+        dynamic = [b for b in _BOUNDS if isinstance(spec.get(b), _Sample)]
+        for b in dynamic:  # a bound from another key: the loader checks it, not the schema
+            del spec[b]
+        if dynamic:
+            spec["description"] = ("expected a number (within bounds that depend on other "
+                                   "keys of this table)")
+        if default is not ... and _jsonable(default) and not isinstance(default, _Sample):
+            spec["default"] = default
+        self._note(key, spec, default is ...)
+        if "enum" in spec:  # a choice: every value is a branch (a ``type`` picks a kind)
+            value = spec["enum"][self.run.decide(len(spec["enum"]))]
+            if key == "type":
+                self.record.discriminant = value
+            return value
+        if default is not ...:
+            return _wrap(default)
+        return _wrap(_example(spec, self.run.rng))
+
+    def number(self, key, *args, **kwargs):
+        return _wrap(super().number(key, *args, **kwargs))  # still a sample once checked
+
+    def has(self, key: str) -> bool:
+        if key not in self.answers:
+            self.answers[key] = bool(self.run.decide(2))
+            if self.answers[key]:
+                self.record.present.add(key)
+        return self.answers[key]
+
+    def is_table(self, key: str) -> bool:
+        return self.has(key)
+
+    def choose(self, options, noun):
+        self.record.exactly_one = True
+        return options[self.run.decide(len(options))]
+
+    def table(self, key, default=..., parse=None):
+        if parse is None:  # read in this run
+            sub = _Recorder(self.run, self.path, self._k(key))
+            self._note(key, ("tables", [sub.record]), default is ...)
+            return sub
+        records, value = _explore(parse, lambda run: _Recorder(run, self.path, self._k(key)))
+        self._note(key, ("tables", records), default is ...)
+        return value
+
+    def tables(self, key, parse, what=None, item_what="a table"):
+        what = what or f"an array of tables ([[{key}]])"
+        records, value = _explore(parse, lambda run: _Recorder(run, self.path,
+                                                               f"{self._k(key)}[0]"))
+        self._note(key, ("array", records, what), False)
+        return [value]
+
+    def each(self, parse):
+        records, value = _explore(lambda t: parse(t, "NAME"),
+                                  lambda run: _Recorder(run, self.path, self._k("NAME")))
+        self.record.named = records
+        return {"NAME": value}
+
+    # -- what the parsers check: the schema does not judge values, the loader does
+
+    def fail(self, key: str, message: str):
+        return None
+
+    def finish(self, allowed_note: str = ""):
+        return None
+
+
+def _jsonable(v: Any) -> bool:
+    try:
+        json.dumps(v)
+        return True
+    except (TypeError, ValueError):
+        return False
+
+
+def _example(spec: dict, rng) -> Any:
+    """A value the schema fragment accepts, for a parser to go on with."""
+    if "anyOf" in spec:
+        return _example(spec["anyOf"][0], rng)
+    kind = spec.get("type")
+    if kind == "array":
+        n = spec.get("minItems", 1)
+        return [_example(spec.get("items", {}), rng) for _ in range(n)]
+    if kind in ("number", "integer"):
+        lo = spec.get("minimum", spec.get("exclusiveMinimum"))
+        hi = spec.get("maximum", spec.get("exclusiveMaximum"))
+        if lo is not None and hi is not None:
+            x = (lo + hi) / 2
+        elif lo is not None:
+            x = lo + 1
+        elif hi is not None:
+            x = hi - 1
+        else:
+            x = float(rng.normal())
+        return int(x) if kind == "integer" else float(x)
+    if kind == "boolean":
+        return True
+    if kind == "object":
+        return {}
+    return "NAME"
+
+
+# ----------------------------------------------------------------------------- merging
+
+
+def _object(records: list[_Record]) -> dict:
+    """The schema of a table from the records of every run: one object, or, where runs chose
+    different ``type``s, one object per ``type`` chosen by ``if``/``then`` on the ``type``
+    (a discriminated union: a bad key is reported against its own kind)."""
+    groups: dict[str | None, list[_Record]] = {}
+    for r in records:
+        groups.setdefault(r.discriminant, []).append(r)
+    if list(groups) == [None]:
+        return _merge(records)
+    kinds = [k for k in groups if k is not None]
+    spec = dict(next(s for r in records for s in r.props["type"]))
+    spec["enum"] = kinds
+    out: dict = {"type": "object", "properties": {"type": spec}}
+    if "default" not in spec:
+        out["required"] = ["type"]
+    out["allOf"] = []
+    for kind in kinds:
+        then = _merge(groups[kind])
+        then["properties"]["type"] = {"const": kind}
+        when: dict = {"properties": {"type": {"const": kind}}}
+        if spec.get("default") != kind:
+            when["required"] = ["type"]  # an absent type is the default kind only
+        out["allOf"].append({"if": when, "then": then})
+    return out
+
+
+def _merge(records: list[_Record]) -> dict:
+    specs: dict[str, list] = {}
+    for r in records:
+        for key, s in r.props.items():
+            specs.setdefault(key, []).extend(s)
+    present = set().union(*(r.present for r in records))
+    required = [k for k in records[0].required
+                if k not in present and all(k in r.required for r in records)]
+    out: dict = {"type": "object", "properties": {k: _combine(s) for k, s in specs.items()}}
+    if required:
+        out["required"] = required
+    named = [x for r in records for x in (r.named or [])]
+    out["additionalProperties"] = _object(named) if named else False
+    if any(r.exactly_one for r in records):
+        out["minProperties"] = out["maxProperties"] = 1
+    return out
+
+
+def _combine(specs: list) -> dict:
+    """The schema of one key from what each run read of it."""
+    leaves: list[dict] = []
+    tables: list[_Record] = []
+    arrays: list[_Record] = []
+    what = None
+    for s in specs:
+        if isinstance(s, dict):
+            if not any(_same(s, x) for x in leaves):
+                leaves.append(s)
+        elif s[0] == "tables":
+            tables += s[1]
+        else:
+            arrays += s[1]
+            what = s[2]
+    out = list(leaves)
+    if tables:
+        out.append(_object(tables))
+    if arrays:
+        out.append({"type": "array", "items": _object(arrays), "description": "expected " + what})
+    if len(out) == 1:
+        return out[0]
+    # A colour or a texture: a table's form joins the other forms of the key.
+    described = next((s.get("description") for s in out if "description" in s), None)
+    merged = {"anyOf": [{k: v for k, v in s.items() if k not in ("description", "default")}
+                        for s in out]}
+    defaults = [s["default"] for s in out if "default" in s]
+    if described:
+        merged["description"] = described
+    if defaults:
+        merged["default"] = defaults[0]
+    return merged
+
+
+def _same(a: dict, b: dict) -> bool:
+    """Two leaf schemas alike but for their description and default."""
+    def strip(s):
+        return json.dumps({k: v for k, v in s.items() if k not in ("description", "default")},
+                          sort_keys=True)
+    return strip(a) == strip(b)
+
+
+def scene_schema() -> dict:
+    """The JSON Schema (draft 2020-12) of a TOML scene, from the loader's parsers."""
+    records, _ = _explore(_scene._parse_top, lambda run: _Recorder(run))
+    body = _object(records)
+    return {"$schema": "https://json-schema.org/draft/2020-12/schema", "$id": SCHEMA_ID,
+            "title": "whitted scene",
+            "description": "A whitted scene (TOML), as tracer/scene.py reads it; "
+                           "docs/scene-format.md. Generated by `whitted schema`.",
+            **body}
+
+
+def schema_text() -> str:
+    return json.dumps(scene_schema(), indent=2) + "\n"
