@@ -571,6 +571,20 @@ def cmd_scenes(args) -> int:
     return EXIT_OK
 
 
+def cmd_schema(args) -> int:
+    from tracer.schema import schema_text
+
+    if args.output is None:
+        sys.stdout.write(schema_text())
+        return EXIT_OK
+    from tracer.imageio import check_output_path
+
+    out = check_output_path(args.output, (".json",), "file type")
+    out.write_text(schema_text())
+    print("wrote " + shown(out))
+    return EXIT_OK
+
+
 def _thresholds(args):
     """OpenImageIO idiff's thresholds from the options (None where not given), checked."""
     from reference.check import Thresholds
@@ -1020,6 +1034,16 @@ def build_parser() -> argparse.ArgumentParser:
 
     s = sub.add_parser("scenes", help="list the built-in scenes")
     s.set_defaults(func=cmd_scenes)
+
+    sc = sub.add_parser(
+        "schema", help="print the JSON Schema of the TOML scene format",
+        description="Print the JSON Schema (draft 2020-12) of the TOML scene format, derived "
+                    "from the scene loader's own parsers, for editors: a `#:schema` line at "
+                    "the top of a scene points TOML language servers (Taplo, Even Better TOML) "
+                    "at it for completion and inline errors (docs/scene-format.md).")
+    sc.add_argument("-o", "--output", metavar="FILE",
+                    help="write the schema to FILE (.json) instead of standard output")
+    sc.set_defaults(func=cmd_schema)
     return p
 
 

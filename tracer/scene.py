@@ -330,8 +330,12 @@ class Scene:
 class _Table:
     """A TOML table being read: remembers its key path and which keys were used."""
 
-    def __init__(self, path: str, key: str, data: Any, what: str = "a table"):
+    def __init__(self, path: str, key: str, data: Any, what: str = "a table",
+                 pattern: str | None = None):
         self.path, self.key = path, key
+        #: the key path with NAME for user-chosen names and [0] for indices
+        self.pattern = key if pattern is None else pattern
+        self.kind: str | None = None  # the ``type`` read, once read
         if not isinstance(data, dict):
             self.fail("", f"expected {what}, got {_show(data)}")
         self.data = data
@@ -339,6 +343,9 @@ class _Table:
 
     def _k(self, key: str) -> str:
         return f"{self.key}.{key}" if self.key and key else (self.key or key)
+
+    def _p(self, key: str) -> str:
+        return f"{self.pattern}.{key}" if self.pattern and key else (self.pattern or key)
 
     def fail(self, key: str, message: str):
         raise SceneError(self.path, self._k(key), message)
@@ -357,14 +364,21 @@ class _Table:
         self.used.add(key)
         if key not in self.data:
             if default is ...:
-                self.fail(key, f"missing; expected {required_what}" + self._unread_note())
+                self.fail(key, f"missing; expected {required_what}" + self._unread_note(key))
             return default
         return self.data[key]
 
-    def _unread_note(self) -> str:
-        """The keys of this table not read so far, for a message about a missing one."""
-        unread = [k for k in self.data if k not in self.used]
-        return f" (this table has: {', '.join(unread)})" if unread else ""
+    def _unread_note(self, key: str) -> str:
+        """A missing key may be the consequence of a key this table does not know (a
+        misspelling, or a key of another kind of table): that key is the one to name."""
+        from tracer.schema import known_keys
+
+        known = known_keys(self.pattern, self.kind)
+        unknown = [k for k in self.data if k not in self.used and k not in known]
+        if known and unknown:
+            self.fail(unknown[0], f"unknown key (expected one of: {', '.join(sorted(known))}); "
+                                  f"{key} is missing")
+        return ""
 
     def number(self, key: str, default: Any = ..., lo: float | None = None,
                hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> float:
@@ -394,6 +408,8 @@ class _Table:
                      {"enum": list(choices)} if choices else {"type": "string"})
         if not isinstance(v, str) or (choices and v not in choices):
             self.fail(key, f"expected {what}, got {_show(v)}")
+        if key == "type":
+            self.kind = v
         return v
 
     def vec3(self, key: str, default: Any = ..., nonzero: bool = False) -> Vec3:
@@ -433,7 +449,7 @@ class _Table:
     def table(self, key: str, default: Any = ..., parse: Any = None) -> Any:
         """The sub-table ``key``; with ``parse``, what ``parse(sub-table)`` makes of it."""
         v = self.raw(key, default, "a table", {"type": "object"})
-        sub = _Table(self.path, self._k(key), v)
+        sub = _Table(self.path, self._k(key), v, pattern=self._p(key))
         return sub if parse is None else parse(sub)
 
     def tables(self, key: str, parse: Any, what: str | None = None,
@@ -443,12 +459,17 @@ class _Table:
         v = self.raw(key, [], what, {"type": "array"})
         if not isinstance(v, list):
             self.fail(key, f"expected {what}, got {_show(v)}")
-        return [parse(_Table(self.path, f"{self._k(key)}[{i}]", x, item_what))
-                for i, x in enumerate(v)]
+        return [parse(_Table(self.path, f"{self._k(key)}[{i}]", x, item_what,
+                             f"{self._p(key)}[0]")) for i, x in enumerate(v)]
 
     def each(self, parse: Any) -> dict:
         """Every key of this table, each a sub-table named by the user: ``parse(sub, name)``."""
-        return {name: parse(self.table(name), name) for name in list(self.data)}
+        out = {}
+        for name in list(self.data):
+            self.used.add(name)
+            out[name] = parse(_Table(self.path, self._k(name), self.data[name],
+                                     pattern=self._p("NAME")), name)
+        return out
 
     def is_table(self, key: str) -> bool:
         """Whether ``key`` holds a table (a texture rather than a colour, say)."""
