@@ -771,8 +771,12 @@ def _parse_compare(t: _Table) -> list[str]:
     what = "a list of: " + ", ".join(f'"{x}"' for x in TRACER_ONLY)
     tracer_only = t.raw("tracer_only", [], what,
                         {"type": "array", "items": {"enum": list(TRACER_ONLY)}})
-    if not isinstance(tracer_only, list) or any(x not in TRACER_ONLY for x in tracer_only):
+    if not isinstance(tracer_only, list):
         t.fail("tracer_only", f"expected {what}, got {_show(tracer_only)}")
+    for i, x in enumerate(tracer_only):
+        if x not in TRACER_ONLY:
+            t.fail(f"tracer_only[{i}]", f"expected one of: "
+                   + ", ".join(f'"{x}"' for x in TRACER_ONLY) + f", got {_show(x)}")
     t.finish()
     return tracer_only
 
