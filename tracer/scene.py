@@ -775,8 +775,8 @@ def _parse_compare(t: _Table) -> list[str]:
         t.fail("tracer_only", f"expected {what}, got {_show(tracer_only)}")
     for i, x in enumerate(tracer_only):
         if x not in TRACER_ONLY:
-            t.fail(f"tracer_only[{i}]", f"expected one of: "
-                   + ", ".join(f'"{x}"' for x in TRACER_ONLY) + f", got {_show(x)}")
+            known = ", ".join(f'"{part}"' for part in TRACER_ONLY)
+            t.fail(f"tracer_only[{i}]", f"expected one of: {known}, got {_show(x)}")
     t.finish()
     return tracer_only
 

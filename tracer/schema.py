@@ -280,6 +280,18 @@ def _object(records: list[_Record]) -> dict:
     out: dict = {"type": "object", "properties": {"type": spec}}
     if "default" not in spec:
         out["required"] = ["type"]
+    # Every kind's keys, without constraints, for editors that complete keys from
+    # ``properties`` and do not evaluate if/then; each kind's own ``then`` judges them.
+    for kind in kinds:
+        for key, specs in (k for r in groups[kind] for k in r.props.items()):
+            if key == "type":
+                continue
+            entry = out["properties"].setdefault(key, {"description": _describe(specs),
+                                                       "x-kinds": []})
+            if kind not in entry["x-kinds"]:
+                entry["x-kinds"].append(kind)
+    for entry in list(out["properties"].values())[1:]:
+        entry["description"] += " (type = " + " | ".join(entry.pop("x-kinds")) + ")"
     out["allOf"] = []
     for kind in kinds:
         then = _merge(groups[kind])
@@ -308,6 +320,13 @@ def _merge(records: list[_Record]) -> dict:
     if exactly_one:
         out["minProperties"] = out["maxProperties"] = 1
     return out
+
+
+def _describe(specs: list) -> str:
+    s = specs[0]
+    if isinstance(s, dict):
+        return s.get("description", "")
+    return "expected " + s[2] if s[0] == "array" else "expected a table"
 
 
 def _combine(specs: list) -> dict:
