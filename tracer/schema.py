@@ -277,30 +277,34 @@ def _object(records: list[_Record]) -> dict:
     kinds = [k for k in groups if k is not None]
     spec = dict(next(s for r in records for s in r.props["type"]))
     spec["enum"] = kinds
-    out: dict = {"type": "object", "properties": {"type": spec}}
+    variants = {kind: _merge(groups[kind]) for kind in kinds}
+    # First, every kind's keys together, for editors that complete keys from the members
+    # of ``allOf`` and do not evaluate if/then (Taplo): a key that every kind having it
+    # reads alike keeps its schema (and so its own keys: a shape's ``to_world`` steps),
+    # others only their description. Each kind's ``then`` below judges them all.
+    union: dict = {"type": "object", "properties": {"type": spec}}
     if "default" not in spec:
-        out["required"] = ["type"]
-    # Every kind's keys, without constraints, for editors that complete keys from
-    # ``properties`` and do not evaluate if/then; each kind's own ``then`` judges them.
-    for kind in kinds:
-        for key, specs in (k for r in groups[kind] for k in r.props.items()):
-            if key == "type":
-                continue
-            entry = out["properties"].setdefault(key, {"description": _describe(specs),
-                                                       "x-kinds": []})
-            if kind not in entry["x-kinds"]:
-                entry["x-kinds"].append(kind)
-    for entry in list(out["properties"].values())[1:]:
-        entry["description"] += " (type = " + " | ".join(entry.pop("x-kinds")) + ")"
-    out["allOf"] = []
-    for kind in kinds:
-        then = _merge(groups[kind])
+        union["required"] = ["type"]
+    for key in dict.fromkeys(k for v in variants.values() for k in v["properties"]):
+        if key == "type":
+            continue
+        have = [kind for kind in kinds if key in variants[kind]["properties"]]
+        forms = [variants[kind]["properties"][key] for kind in have]
+        note = f" (type = {' | '.join(have)})" if len(have) < len(kinds) else ""
+        if all(f == forms[0] for f in forms):
+            entry = dict(forms[0])
+            entry["description"] = entry.get("description", "") + note
+        else:
+            entry = {"description": forms[0].get("description", "") + note}
+        union["properties"][key] = entry
+    members: list = [union]
+    for kind, then in variants.items():
         then["properties"]["type"] = {"const": kind}
         when: dict = {"properties": {"type": {"const": kind}}}
         if spec.get("default") != kind:
             when["required"] = ["type"]  # an absent type is the default kind only
-        out["allOf"].append({"if": when, "then": then})
-    return out
+        members.append({"if": when, "then": then})
+    return {"type": "object", "allOf": members}
 
 
 def _merge(records: list[_Record]) -> dict:
@@ -320,13 +324,6 @@ def _merge(records: list[_Record]) -> dict:
     if exactly_one:
         out["minProperties"] = out["maxProperties"] = 1
     return out
-
-
-def _describe(specs: list) -> str:
-    s = specs[0]
-    if isinstance(s, dict):
-        return s.get("description", "")
-    return "expected " + s[2] if s[0] == "array" else "expected a table"
 
 
 def _combine(specs: list) -> dict:
