@@ -23,11 +23,13 @@ def licence_fields(name: str) -> list[str]:
     return [f for f in fields if f]
 
 
-def runtime_closure() -> dict[str, list[str]]:
-    """Every installed distribution the project's dependencies need (no extras), with
-    its licence fields."""
+def runtime_closure(extra: str | None = None) -> dict[str, list[str]]:
+    """Every installed distribution the project's dependencies need (no extras; with
+    ``extra``, that optional group's as well), with its licence fields."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     todo = [Requirement(r) for r in project["dependencies"]]
+    if extra:
+        todo += [Requirement(r) for r in project["optional-dependencies"][extra]]
     seen: dict[str, list[str]] = {}
     while todo:
         req = todo.pop()
@@ -59,3 +61,12 @@ def test_no_runtime_dependency_is_gpl_licensed():
     assert "numpy" in closure and "mitsuba" in closure  # the walk found the dependencies
     gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
     assert not gpl, f"GPL-licensed runtime dependencies of a BSD-3-Clause project: {gpl}"
+
+
+def test_no_test_dependency_is_gpl_licensed():
+    """The test extra too (jsonschema, MIT, for tests/test_schema.py; hypothesis, MPL-2.0):
+    the test suite is distributed with the project."""
+    closure = runtime_closure("test")
+    assert "jsonschema" in closure and closure["jsonschema"], closure.get("jsonschema")
+    gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
+    assert not gpl, f"GPL-licensed test dependencies of a BSD-3-Clause project: {gpl}"
