@@ -227,7 +227,8 @@ def _toy_material(t, name):
     glow = t.number("glow", 2.0, lo=0)
     if t.has("halo"):
         t.color("halo")
-    t.string("mood", "calm", ("calm", "wild"))
+    if t.string("mood", "calm", ("calm", "wild")) == "wild":
+        t.number("fury", 1.0, lo=0)  # a key that one value of another key brings
     return diffuse.Diffuse(name, (glow / 4,) * 3)
 
 
@@ -250,7 +251,7 @@ def test_a_new_kind_and_a_new_key_appear_in_the_schema(monkeypatch):
     mats = after["properties"]["materials"]["additionalProperties"]
     assert kinds(mats)[-1] == "toy"
     toy = variant(mats, "toy")
-    assert set(toy["properties"]) == {"type", "glow", "halo", "mood"}
+    assert set(toy["properties"]) == {"type", "glow", "halo", "mood", "fury"}
     assert toy["properties"]["glow"]["minimum"] == 0 and toy["properties"]["glow"]["default"] == 2
     assert toy["properties"]["mood"]["enum"] == ["calm", "wild"]
     assert "halo" not in toy.get("required", [])  # read only when present
@@ -274,6 +275,26 @@ def test_a_new_kind_and_a_new_key_appear_in_the_schema(monkeypatch):
         assert loader_error(doc).key == key and schema_error(vv, doc)[0] == key
     monkeypatch.undo()
     assert scene_schema() == before
+
+
+def test_choices_among_many_values_do_not_multiply(monkeypatch):
+    """Three keys naming one of 40 values each: varied one at a time (1 + 3 x 39 runs of the
+    parser, not 40^3), and a key that a non-default value brings is still found."""
+    names = tuple(f"glass{i}" for i in range(40))
+    runs = []
+
+    def parse(t, name):
+        runs.append(1)
+        picks = [t.string(k, names[0], names) for k in ("ior", "ext_ior", "coat")]
+        if picks[2] == names[-1]:
+            t.number("coat_depth", 1.0)
+        return diffuse.Diffuse(name)
+
+    monkeypatch.setattr(schema_mod, "_VOCABULARY", {})
+    monkeypatch.setitem(materials.REGISTRY, "glassy", SimpleNamespace(parse=parse))
+    glassy = variant(scene_schema()["properties"]["materials"]["additionalProperties"],
+                     "glassy")
+    assert "coat_depth" in glassy["properties"] and len(runs) == 1 + 3 * 39
 
 
 # ------------------------------------------------------------------ messages

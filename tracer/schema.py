@@ -41,27 +41,37 @@ MAX_RUNS = 4096
 
 
 class _Run:
-    """One run of a parser: the answers given at its branch points (a depth-first walk)."""
+    """One run of a parser: the answers given at its branch points (a depth-first walk).
+
+    Every combination of answers is tried at the branch points that decide which keys a
+    table has (its ``type``, whether a key is present, a colour or a texture, which step),
+    but a choice among other values (a Fresnel formula, a named index of refraction) is
+    varied one at a time, the others at their first answer: such choices multiply (two
+    keys naming one of 20 glasses each would take 400 runs) and rarely decide a key
+    together.
+    """
 
     def __init__(self, script: list[int]):
         self.script = script
-        self.trace: list[tuple[int, int]] = []  # (number of answers, the one given)
+        self.trace: list[tuple[int, int, bool]] = []  # (answers, the one given, one at a time)
         self.rng = np.random.default_rng(len(script) + 1)
 
-    def decide(self, n: int) -> int:
+    def decide(self, n: int, single: bool = False) -> int:
         i = len(self.trace)
         choice = self.script[i] if i < len(self.script) else 0
-        self.trace.append((n, choice))
+        self.trace.append((n, choice, single))
         return choice
 
     def next_script(self) -> list[int] | None:
         """The answers of the next run: the last branch point with an answer left, advanced."""
         trace = list(self.trace)
-        while trace and trace[-1][1] + 1 >= trace[-1][0]:
+        while trace:
+            n, choice, single = trace[-1]
+            varied = any(s and c for _, c, s in trace[:-1])
+            if choice + 1 < n and not (single and varied):
+                return [c for _, c, _ in trace[:-1]] + [choice + 1]
             trace.pop()
-        if not trace:
-            return None
-        return [c for _, c in trace[:-1]] + [trace[-1][1] + 1]
+        return None
 
 
 class _Sample(float):
@@ -171,7 +181,11 @@ class _Recorder(_scene._Table):
             spec["default"] = default
         self._note(key, spec, default is ...)
         if "enum" in spec:  # a choice: every value is a branch (a ``type`` picks a kind)
-            value = spec["enum"][self.run.decide(len(spec["enum"]))]
+            values = list(spec["enum"])
+            if default in values:  # the default first: the other choices vary from it
+                values.remove(default)
+                values.insert(0, default)
+            value = values[self.run.decide(len(values), single=key != "type")]
             if key == "type":
                 self.record.discriminant = value
             return value
