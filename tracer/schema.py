@@ -40,6 +40,10 @@ from tracer import scene as _scene
 MAX_RUNS = 4096
 
 
+class TooManyRuns(RuntimeError):
+    """A parser whose branches multiply beyond MAX_RUNS (never swallowed by a run)."""
+
+
 class _Run:
     """One run of a parser: the answers given at its branch points (a depth-first walk).
 
@@ -123,13 +127,15 @@ def _explore(parse, make) -> tuple[list[_Record], Any]:
                 v = parse(t)
                 if value is None:
                     value = v
+            except TooManyRuns:
+                raise
             except Exception:  # noqa: BLE001 - a plausible value can still fail a later
                 pass           # check; every key up to there is recorded
         records.append(t.record)
         script = run.next_script()
         if script is None:
             return records, value
-    raise RuntimeError(f"a parser branches more than {MAX_RUNS} ways; see tracer/schema.py")
+    raise TooManyRuns(f"a parser branches more than {MAX_RUNS} ways; see tracer/schema.py")
 
 
 #: Every key a table may have, by its key pattern (``_Table.pattern``) and its ``type``
