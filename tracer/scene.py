@@ -364,13 +364,14 @@ class _Table:
         self.used.add(key)
         if key not in self.data:
             if default is ...:
-                self.fail(key, f"missing; expected {required_what}" + self._unread_note(key))
+                self._unknown_first(key)
+                self.fail(key, f"missing; expected {required_what}")
             return default
         return self.data[key]
 
-    def _unread_note(self, key: str) -> str:
-        """A missing key may be the consequence of a key this table does not know (a
-        misspelling, or a key of another kind of table): that key is the one to name."""
+    def _unknown_first(self, key: str) -> None:
+        """Before saying ``key`` is missing: a key this kind of table does not know (a
+        misspelling, or a key of another kind) is the likelier fault, and is named first."""
         from tracer.schema import known_keys
 
         known = known_keys(self.pattern, self.kind)
@@ -378,7 +379,6 @@ class _Table:
         if known and unknown:
             self.fail(unknown[0], f"unknown key (expected one of: {', '.join(sorted(known))}); "
                                   f"{key} is missing")
-        return ""
 
     def number(self, key: str, default: Any = ..., lo: float | None = None,
                hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> float:

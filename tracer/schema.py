@@ -36,7 +36,7 @@ import numpy as np
 from tracer import scene as _scene
 
 #: The most runs of one parser while exploring its branches: far above what the kinds
-#: need (a shape takes 36), a guard against a parser whose branches multiply.
+#: need (a shape takes 26), a guard against a parser whose branches multiply.
 MAX_RUNS = 4096
 
 
