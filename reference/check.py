@@ -618,6 +618,9 @@ class CheckRun:
     reference_vs_mitsuba: dict | None = None
     #: light paths and materials, for an image that fails
     decomposition: dict | None = None
+    #: the catalog's formula bugs ranked by how much of the difference each explains
+    #: (:class:`reference.suspects.SuspectRanking`), for an image that fails
+    suspects: dict | None = None
     files: dict = field(default_factory=dict)
     seconds: float = 0.0
 
@@ -627,18 +630,22 @@ class CheckRun:
                 "check": self.result.to_json(),
                 "mitsuba": None if self.mitsuba is None else self.mitsuba.to_json(),
                 "reference_vs_mitsuba": self.reference_vs_mitsuba,
-                "decomposition": self.decomposition, "files": self.files,
+                "decomposition": self.decomposition, "suspects": self.suspects,
+                "files": self.files,
                 "seconds": self.seconds}
 
 
 def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | None = None,
                 mitsuba: bool = False, seed: int = 0, reference: Reference | None = None,
-                decompose: bool = True, log=None) -> CheckRun:
+                decompose: bool = True, suspects: bool = True, log=None) -> CheckRun:
     """Judge a read image (:class:`~reference.user_image.UserImage`) against the scene's reference.
 
     ``reference`` may be given (a suite's stored image); otherwise the tracer
     renders it. ``spp`` selects the ``--spp`` noise model, ``mitsuba`` adds
-    Mitsuba's deterministic reference as a second reference.
+    Mitsuba's deterministic reference as a second reference. An image that
+    fails gets its difference split by light path and material (``decompose``)
+    and the catalog's formula bugs ranked by how much of it each explains
+    (``suspects``; :func:`reference.suspects.rank_catalog`).
     """
     import time
 
@@ -675,6 +682,13 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     if decompose and not result.passed:
         say("splitting the difference by light path and material")
         run.decomposition = decomposition(scene, result, ids, names, seed)
+    if suspects and not result.passed:
+        from reference.suspects import rank_catalog
+
+        say("ranking the catalog's formula bugs by how much of the difference each explains")
+        a = result.arrays
+        run.suspects = rank_catalog(scene, a["diff"], a["var"], a["valid"], seed,
+                                    log=log).to_json()
     run.seconds = time.perf_counter() - start
     return run
 
@@ -705,6 +719,13 @@ def format_run(run: CheckRun, title: str) -> str:
         d = run.decomposition
         out.append(format_decomposition([PathFit(**p) for p in d["light_paths"]],
                                         [MaterialPart(**m) for m in d["materials"]]))
+    if run.suspects is not None:
+        from reference.suspects import SuspectFit, format_suspects
+
+        sp = run.suspects
+        out.append(format_suspects([SuspectFit(**f) for f in sp["top"]]) +
+                   f"\n  ({sp['candidates']} bugs of the catalog reach the scene, "
+                   f"{len(sp['ranked'])} change its image; {sp['seconds']:.1f} s)")
     verdict = "PASS" if run.passed else "FAIL"
     if run.passed and run.warned:
         verdict = "PASS with a WARNING"
@@ -843,6 +864,21 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
                      f"relative error</th></tr>{rows}</table><table><tr><th>first hit</th>"
                      "<th>pixels</th>"
                      f"<th>share of the difference</th><th>bias</th></tr>{mats}</table>")
+    if run.suspects is not None:
+        sp = run.suspects
+        rows = "".join(f"<tr><td>{i}</td><td><code>{esc(f['id'])}</code>"
+                       + (f" (same image: {esc(', '.join(f['ties']))})" if f["ties"] else "")
+                       + f"</td><td>{esc(f['formula'])}</td><td>{esc(f['correct'])}</td>"
+                       f"<td>{esc(f['topic'])}</td><td>{100 * f['explains']:.0f} %</td>"
+                       f"<td>{f['scale']:.2f}</td></tr>" for i, f in enumerate(sp["top"], 1))
+        parts.append("<h2>Suspects</h2><p class='meta'>The catalog's formula bugs "
+                     f"(whitted mutants --list) that reach the scene ({sp['candidates']}; "
+                     f"{len(sp['ranked'])} change its image), ranked by the share of the "
+                     "difference beyond the noise that the bug's image explains (a weighted "
+                     "least-squares fit; strength 1: exactly that bug).</p>"
+                     "<table><tr><th>rank</th><th>bug</th><th>formula</th><th>right</th>"
+                     "<th>lecture topic</th><th>explains</th><th>strength</th></tr>"
+                     f"{rows}</table>")
     parts.append("<h2>The images</h2>")
     parts.append(viewer([("your image", a["image"]), ("reference", a["reference"])],
                         "the difference view outlines the pixels beyond the threshold in cyan",
