@@ -17,15 +17,25 @@ difference is:
   whose camera ray first hits each material (:func:`tracer.integrator.material_ids`),
   the background and the emitters, with its share of the difference beyond
   the noise and its relative bias;
-* by suspect (:func:`rank_suspects`): candidates, each a formula bug with a
-  function rendering the reference with that bug; D ~ k (M_c - R) for each
-  candidate's image M_c, ranked by the share of D it explains. A render made
-  with one of the bugs is explained by that bug with k near 1.
+* by suspect (:func:`rank_suspects`, :func:`rank_catalog`): candidates, each
+  a formula bug with the reference rendered with that bug; D ~ k (M_c - R)
+  for each candidate's image M_c, ranked by the share of D it explains. A
+  render made with one of the bugs is explained by that bug with k near 1.
+  ``whitted check`` takes the candidates from the catalog of formula bugs
+  (:mod:`reference.mutants`): those whose switch the scene's render reaches
+  (:func:`reached_faults`), each rendered once and kept on disk
+  (:func:`mutated_image`).
 
-The share a suspect explains is its fit's explained sum of squares over
+The share a suspect explains is R^2 of its fit, the explained sum of squares
+sum w (k x)^2 over sum w D^2 (equivalently: the candidate that leaves the
+smallest weighted residual ranks first); ``beyond_noise`` divides the same by
 the part of sum w D^2 that noise does not account for (sum w D^2 minus the
-number of values, its expectation under noise alone): "explains 95 % of the
-difference beyond the noise", at most 100 %.
+number of values, its expectation under noise alone), at most 100 %. k <= 0
+(the image is off the other way from the bug) explains nothing. Two bugs
+whose images are the same on the pixels judged are ties: no image of that
+scene can tell them apart. What the ranking cannot do: name a bug the
+catalog lacks (it then names the bugs whose images look most alike, each
+explaining a part), or two bugs at once (each is fitted alone).
 """
 
 from __future__ import annotations
@@ -191,6 +201,13 @@ def format_decomposition(paths: list[PathFit], materials: list[MaterialPart]) ->
 
 #: Suspects printed (and put in check.json with their fits; every ranked one in ``ranked``).
 TOP = 3
+#: Two bugs' differences M - R whose weighted cosine squared is at least this are the same
+#: pattern up to a factor (within 0.1 % of its weighted energy): a fit explains the image
+#: with either as well, up to the noise, and only the strength k tells them apart (a bug at
+#: k = 1 is the image as it is; the other needs scaling). Measured: the catalog's two
+#: refraction scalings (no (n1/n2)^2, and its inverse) on a light inside glass, whose
+#: differences are 1.25 and 1.81 times one pattern.
+ALIKE = 0.999
 
 
 @dataclass(frozen=True)
@@ -213,16 +230,23 @@ class SuspectFit:
     id: str
     formula: str
     topic: str
-    #: share of the difference beyond noise that k (M - R) explains (0 where k <= 0: the
-    #: image is off the other way)
+    #: R^2: the share of sum w D^2 that k (M - R) explains (0 where k <= 0: the image is
+    #: off the other way); the ranking's key (the largest leaves the smallest residual)
     explains: float
     #: the fitted strength k (1: exactly this bug)
     scale: float
     scale_error: float
     correct: str = ""
-    #: other suspects whose image with their bug is the same as this one's (bit for bit on
-    #: the pixels judged): this scene cannot tell them apart
+    #: the same explained sum of squares over the part of sum w D^2 beyond its expectation
+    #: under noise alone, at most 1
+    beyond_noise: float = 0.0
+    #: other suspects this image cannot tell from this one: their image with their bug is
+    #: the same bit for bit on the pixels judged, or the same pattern (:data:`ALIKE`) at a
+    #: strength that agrees with this one's within 3 standard errors
     ties: list[str] = field(default_factory=list)
+    #: other suspects whose image differs from the reference in the same pattern up to a
+    #: factor (:data:`ALIKE`): told apart only by the strength (ranked nearest 1 first)
+    alike: list[str] = field(default_factory=list)
 
 
 def rank_difference(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
@@ -240,6 +264,7 @@ def rank_difference(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
     w = _weights(var, use)
     d = np.where(w > 0, diff, 0.0)
     excess = _excess(d, w)
+    total = float((w * d * d).sum())
     b = np.asarray(base, dtype=np.float64)
     xs, kept = [], []
     for c, m in zip(candidates, images, strict=True):
@@ -252,11 +277,37 @@ def rank_difference(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
     fits = []
     for c, x in zip(kept, xs, strict=True):
         k, se, ss = single_fit(d, x, w)
-        fits.append(SuspectFit(c.id, c.formula, c.topic, _share(ss, excess) if k > 0 else 0.0,
-                               k, se, c.correct))
+        ss = ss if k > 0 else 0.0
+        fits.append(SuspectFit(c.id, c.formula, c.topic, ss / total if total > 0 else 0.0,
+                               k, se, c.correct, _share(ss, excess)))
     for i, x in enumerate(xs):
         fits[i].ties = [kept[j].id for j, y in enumerate(xs) if j != i and np.array_equal(x, y)]
-    return sorted(fits, key=lambda f: -f.explains)
+    norms = [float((w * x * x).sum()) for x in xs]
+    for i, x in enumerate(xs):
+        for j in range(i + 1, len(xs)):
+            if kept[j].id in fits[i].ties:
+                continue
+            c = float((w * x * xs[j]).sum())
+            if c > 0 and c * c >= ALIKE * norms[i] * norms[j]:
+                a, b = fits[i], fits[j]
+                same = abs(a.scale - b.scale) <= 3 * math.hypot(a.scale_error, b.scale_error)
+                (a.ties if same else a.alike).append(b.id)
+                (b.ties if same else b.alike).append(a.id)
+    return _order(fits)
+
+
+def _order(fits: list[SuspectFit]) -> list[SuspectFit]:
+    """By R^2, best first; a group of alike suspects at its best one's place, by |log k|."""
+    by_id = {f.id: f for f in fits}
+    out, placed = [], set()
+    for f in sorted(fits, key=lambda f: -f.explains):
+        if f.id in placed:
+            continue
+        group = [f] + [by_id[a] for a in f.alike if a not in placed]
+        group.sort(key=lambda g: abs(math.log(g.scale)) if g.scale > 0 else math.inf)
+        out += group
+        placed.update(g.id for g in group)
+    return out
 
 
 def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
@@ -448,11 +499,15 @@ def rank_catalog(scene, diff: np.ndarray, var: np.ndarray, use: np.ndarray | Non
 def format_suspects(fits: list[SuspectFit], top: int = TOP) -> str:
     lines = ["suspects (formula bugs whose image explains the difference best):"]
     for i, f in enumerate(fits[:top], 1):
-        ties = f" (the same image as {', '.join(f.ties)})" if f.ties else ""
-        lines.append(f"  {i}. {f.id}: {f.formula}" + (f" (right: {f.correct})" if f.correct
-                                                          else "")
-                     + f"; lecture: {f.topic}; explains {100 * f.explains:.0f} % of the "
-                     f"difference, at strength {f.scale:.2f}{ties}")
+        ties = f"; not told apart from {', '.join(f.ties)}" if f.ties else ""
+        if f.alike:
+            ties += f"; the same pattern, other strength, as {', '.join(f.alike)}"
+        lines.append(f"  {i}. {f.id} (lecture: {f.topic}): explains {100 * f.explains:.1f} % "
+                     f"of the difference ({100 * f.beyond_noise:.0f} % of what noise leaves), "
+                     f"at strength {f.scale:.2f}{ties}")
+        lines.append(f"       formula: {f.formula}")
+        if f.correct:
+            lines.append(f"       right:   {f.correct}")
     if not fits:
         lines.append("  none: no bug of the catalog that the scene reaches changes its image")
     return "\n".join(lines)
