@@ -66,7 +66,7 @@ def main(argv=None) -> int:
     if args.cache is not None:
         import os
 
-        os.environ["XDG_CACHE_HOME"] = str(args.cache)
+        os.environ["WHITTED_SUSPECTS_CACHE"] = str(args.cache)
     todo = [m.id for m in (mutants.get(args.only.split(",")) if args.only else mutants.CATALOG)]
     start = time.perf_counter()
     rng = np.random.default_rng(1)

@@ -985,7 +985,8 @@ def build_parser() -> argparse.ArgumentParser:
     ck.add_argument("--no-suspects", action="store_true", dest="no_suspects",
                     help="for an image that fails, do not rank the catalog's formula bugs "
                          "by how much of the difference each explains (that renders the "
-                         "scene once per bug it reaches, kept in ~/.cache/whitted/suspects)")
+                         "scene once per bug it reaches, kept in ~/.cache/whitted/suspects or "
+                         "WHITTED_SUSPECTS_CACHE)")
     ck.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     threshold_opts(ck)

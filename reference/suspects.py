@@ -359,7 +359,10 @@ def reached_faults(scene) -> frozenset[str]:
 
 
 def cache_dir() -> Path:
-    """Where the scenes' images with a bug are kept: ``$XDG_CACHE_HOME/whitted/suspects``."""
+    """Where the scenes' images with a bug are kept: ``WHITTED_SUSPECTS_CACHE``, else
+    ``$XDG_CACHE_HOME/whitted/suspects`` (``~/.cache/whitted/suspects``)."""
+    if os.environ.get("WHITTED_SUSPECTS_CACHE"):
+        return Path(os.environ["WHITTED_SUSPECTS_CACHE"])
     base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
     return Path(base) / "whitted" / "suspects"
 

@@ -323,11 +323,14 @@ def test_an_image_with_a_formula_bug_fails_from_the_command_line(tmp_path, monke
     scene = _scene("sphere_point")
     write_png(tmp_path / "bug.png", _render_with(monkeypatch, scene, lights, "lambert_cosine",
                                                  _no_cosine))
-    r = run_cli("check", tmp_path / "bug.png", "--scene", "sphere_point", "-o", tmp_path / "o")
+    r = run_cli("check", tmp_path / "bug.png", "--scene", "sphere_point", "-o", tmp_path / "o",
+                "--no-suspects")
     assert r.returncode == 1, r.stdout + r.stderr
     assert "FAIL" in r.stdout and "where the difference sits" in r.stdout
+    assert "suspects" not in r.stdout          # --no-suspects: the catalog is not ranked
     data = json.loads((tmp_path / "o" / "check.json").read_text())
     assert data["pass"] is False and data["check"]["method"] == "local"
+    assert data["suspects"] is None
     assert {"diff.png", "side_by_side.png", "check.html", "reference.exr"} <= {
         p.name for p in (tmp_path / "o").iterdir()}
 
