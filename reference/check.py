@@ -320,16 +320,19 @@ def _shifted_box(a: np.ndarray, r: int, axis: int) -> np.ndarray:
     """
     a = np.asarray(a, dtype=np.float64)
     h, w = a.shape
-    c = np.zeros((h + 1, w + 1))
-    c[1:, 1:] = np.cumsum(np.cumsum(a, axis=0), axis=1)
-    ys, xs = np.arange(h), np.arange(w)
-    if axis == 1:
-        y0, y1 = np.clip(ys - r, 0, h), np.clip(ys + r + 1, 0, h)
-        x0, x1 = np.clip(xs - r, 0, w), np.clip(xs + r, 0, w)
-    else:
-        y0, y1 = np.clip(ys - r, 0, h), np.clip(ys + r, 0, h)
-        x0, x1 = np.clip(xs - r, 0, w), np.clip(xs + r + 1, 0, w)
-    return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+    # Shifted copies added up, not a summed-area table: differences of running sums lose
+    # every small value after one huge one (a firefly of 1e7 leaves its squares' 1e14
+    # in every later sum, and windows far away came out as 0 or negative).
+    dy = range(-r, r + 1) if axis == 1 else range(-r, r)
+    dx = range(-r, r) if axis == 1 else range(-r, r + 1)
+    out = np.zeros((h, w))
+    for oy in dy:
+        for ox in dx:
+            ys0, ys1 = max(0, -oy), min(h, h - oy)
+            xs0, xs1 = max(0, -ox), min(w, w - ox)
+            if ys0 < ys1 and xs0 < xs1:
+                out[ys0:ys1, xs0:xs1] += a[ys0 + oy:ys1 + oy, xs0 + ox:xs1 + ox]
+    return out
 
 
 #: Factors a tried by :func:`footprint_factor`: 0 and 2^-24 .. 1 (one sample), in steps of

@@ -221,6 +221,16 @@ def test_local_variance_leaves_the_pixel_itself_out():
     assert v[4, 4] == 0 and v[4, 5] > 0
 
 
+def test_local_variance_far_from_a_firefly_is_the_noise_around_it():
+    # One pixel 1e7 off (an unnormalised highlight) must not change the estimate of
+    # windows that do not hold it: a summed-area table lost them (0 beyond it).
+    rng = np.random.default_rng(3)
+    d = rng.normal(0, 1e-3, (48, 64))
+    far = local_variance(d)[20:, 20:]
+    d[5, 5] = 5.5e7
+    assert np.allclose(local_variance(d)[20:, 20:], far, rtol=1e-9, atol=0)
+
+
 def test_rounding_bias_bound_is_half_a_step_without_noise_and_vanishes_with_it():
     b = rounding_bias_bound(np.array([0.0, 0.1, 0.5, 1.0]))
     assert b[0] == 0.5 and 0.3 < b[1] < 0.5
