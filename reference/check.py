@@ -870,15 +870,18 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
     if run.suspects is not None:
         sp = run.suspects
         rows = "".join(f"<tr><td>{i}</td><td><code>{esc(f['id'])}</code>"
-                       + (f" (same image: {esc(', '.join(f['ties']))})" if f["ties"] else "")
+                       + (f" (not told apart from {esc(', '.join(f['ties']))})"
+                          if f["ties"] else "")
+                       + (f" (same pattern, other strength: {esc(', '.join(f['alike']))})"
+                          if f["alike"] else "")
                        + f"</td><td>{esc(f['formula'])}</td><td>{esc(f['correct'])}</td>"
                        f"<td>{esc(f['topic'])}</td><td>{100 * f['explains']:.0f} %</td>"
                        f"<td>{f['scale']:.2f}</td></tr>" for i, f in enumerate(sp["top"], 1))
         parts.append("<h2>Suspects</h2><p class='meta'>The catalog's formula bugs "
                      f"(whitted mutants --list) that reach the scene ({sp['candidates']}; "
                      f"{len(sp['ranked'])} change its image), ranked by the share of the "
-                     "difference beyond the noise that the bug's image explains (a weighted "
-                     "least-squares fit; strength 1: exactly that bug).</p>"
+                     "difference that the bug's image explains (R<sup>2</sup> of a least-squares "
+                     "fit weighted by the noise; strength 1: exactly that bug).</p>"
                      "<table><tr><th>rank</th><th>bug</th><th>formula</th><th>right</th>"
                      "<th>lecture topic</th><th>explains</th><th>strength</th></tr>"
                      f"{rows}</table>")

@@ -278,7 +278,7 @@ def rank_difference(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
     for c, x in zip(kept, xs, strict=True):
         k, se, ss = single_fit(d, x, w)
         ss = ss if k > 0 else 0.0
-        fits.append(SuspectFit(c.id, c.formula, c.topic, ss / total if total > 0 else 0.0,
+        fits.append(SuspectFit(c.id, c.formula, c.topic, min(1.0, ss / total) if total > 0 else 0.0,
                                k, se, c.correct, _share(ss, excess)))
     for i, x in enumerate(xs):
         fits[i].ties = [kept[j].id for j, y in enumerate(xs) if j != i and np.array_equal(x, y)]
