@@ -385,7 +385,7 @@ def test_suspects_are_ranked_with_the_injected_bug_first(monkeypatch):
         noisy = image + rng.normal(0, 0.01 * ref.image.mean(), image.shape)
         fits = rank_suspects(noisy, scene, candidates, reference=ref.image)
         assert fits[0].id == bug_id, format_suspects(fits)
-        assert fits[0].explains > 0.9 and abs(fits[0].scale - 1) < 0.05
+        assert fits[0].beyond_noise > 0.9 and abs(fits[0].scale - 1) < 0.05
         assert "lecture:" in format_suspects(fits)
 
 
