@@ -7,7 +7,8 @@ render with the bug switched on (at another seed than the reference's where
 lights are sampled, so its light samples are its own), plus Gaussian noise of
 ``--noise`` times the image's mean (a renderer's own sampling noise; its
 variance is left for the check to estimate from the image, as for any image
-without a variance layer). The same noise on the tracer as written must
+without a variance layer, or given to it with ``--variance``, as an EXR's
+variance layer gives it). The same noise on the tracer as written must
 pass the check (the control; a scene where it does not is left out and
 listed). The check then ranks the catalog's bugs that
 reach the scene (:func:`reference.suspects.rank_catalog`), and the bug's rank
@@ -24,7 +25,8 @@ is counted:
 Bugs the tracer's image does not show on any scene (the check passes
 everywhere) are listed apart: they cannot be named from an image.
 
-    python benchmarks/bench_suspects.py [--width 64] [--spp 16] [--noise 0.01] [--only ID,...]
+    python benchmarks/bench_suspects.py [--width 64] [--spp 16] [--noise 0.01] [--variance]
+                                        [--only ID,...]
 
 The sizes are the catalog sweep's quick ones (``reference.mutants.sweep_size``).
 Each bug's image is kept in the suspects' cache (``~/.cache/whitted/suspects``;
@@ -61,6 +63,9 @@ def main(argv=None) -> int:
     p.add_argument("--spp", type=int, default=mutants.QUICK_SPP)
     p.add_argument("--noise", type=float, default=0.01,
                    help="Gaussian noise added to the bug's image, times the image's mean")
+    p.add_argument("--variance", action="store_true",
+                   help="give the check the noise's variance (as an EXR variance layer) "
+                        "instead of letting it estimate the noise from the image")
     p.add_argument("--only", default=None, help="comma-separated bug ids (default: all)")
     p.add_argument("--cache", type=Path, default=None, help="cache folder of the bugs' images")
     args = p.parse_args(argv)
@@ -91,9 +96,11 @@ def main(argv=None) -> int:
         sigma = args.noise * abs(float(clean.mean()))
         noise = rng.normal(0, sigma, clean.shape) if sigma > 0 else 0.0
 
-        def check(img, label, scene=scene, ref=ref, noise=noise):
+        var = np.full(clean.shape, sigma ** 2) if args.variance and sigma > 0 else None
+
+        def check(img, label, scene=scene, ref=ref, noise=noise, var=var):
             return check_image(UserImage(label, "array", "float32",
-                                         img.astype(np.float64) + noise),
+                                         img.astype(np.float64) + noise, variance=var),
                                scene, reference=ref, decompose=False)
 
         # The control: the tracer as written with the same noise must pass, or a failure
@@ -135,7 +142,9 @@ def main(argv=None) -> int:
     print()
     print(f"hit rate: {first}/{shown} bugs named first ({100 * first / max(shown, 1):.0f} %), "
           f"{top3}/{shown} in the top three ({100 * top3 / max(shown, 1):.0f} %); "
-          f"noise {args.noise:g} x the mean, width {args.width}, at most {args.spp} spp; "
+          f"noise {args.noise:g} x the mean"
+          + (", its variance given" if args.variance else ", estimated by the check")
+          + f", width {args.width}, at most {args.spp} spp; "
           f"{time.perf_counter() - start:.0f} s")
     if tied:
         print("named first in a tie (another bug's image on that scene is the same, or the "

@@ -403,6 +403,7 @@ def mutated_image(scene, fault_id: str | None, seed: int = 0, cache: Path | None
     default), keyed by the scene's content, the seed, the bug and the tracer's
     sources.
     """
+    from reference import mutants  # noqa: F401  (declares the catalog's ids)
     from tracer import faults
     from tracer.integrator import Integrator
 
