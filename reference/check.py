@@ -94,6 +94,12 @@ the same at float precision; ``--mitsuba`` checks that again and judges the
 image against Mitsuba's image too). Where the tracer samples area lights, the
 reference is the mean of ``compare.TRACER_SEEDS`` seeds, and its own
 variance is added to the image's.
+
+An image that fails is explained (:mod:`reference.suspects`): its
+difference split by light path and by first-hit material, and the catalog's
+formula bugs (:mod:`reference.mutants`) that the scene reaches ranked by how
+much of the difference each one's image explains (``suspects``; measured by
+``benchmarks/bench_suspects.py``).
 """
 
 from __future__ import annotations
