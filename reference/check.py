@@ -94,6 +94,12 @@ the same at float precision; ``--mitsuba`` checks that again and judges the
 image against Mitsuba's image too). Where the tracer samples area lights, the
 reference is the mean of ``compare.TRACER_SEEDS`` seeds, and its own
 variance is added to the image's.
+
+An image that fails is explained (:mod:`reference.suspects`): its
+difference split by light path and by first-hit material, and the catalog's
+formula bugs (:mod:`reference.mutants`) that the scene reaches ranked by how
+much of the difference each one's image explains (``suspects``; measured by
+``benchmarks/bench_suspects.py``).
 """
 
 from __future__ import annotations
@@ -320,16 +326,19 @@ def _shifted_box(a: np.ndarray, r: int, axis: int) -> np.ndarray:
     """
     a = np.asarray(a, dtype=np.float64)
     h, w = a.shape
-    c = np.zeros((h + 1, w + 1))
-    c[1:, 1:] = np.cumsum(np.cumsum(a, axis=0), axis=1)
-    ys, xs = np.arange(h), np.arange(w)
-    if axis == 1:
-        y0, y1 = np.clip(ys - r, 0, h), np.clip(ys + r + 1, 0, h)
-        x0, x1 = np.clip(xs - r, 0, w), np.clip(xs + r, 0, w)
-    else:
-        y0, y1 = np.clip(ys - r, 0, h), np.clip(ys + r, 0, h)
-        x0, x1 = np.clip(xs - r, 0, w), np.clip(xs + r + 1, 0, w)
-    return c[y1][:, x1] - c[y0][:, x1] - c[y1][:, x0] + c[y0][:, x0]
+    # Shifted copies added up, not a summed-area table: differences of running sums lose
+    # every small value after one huge one (a firefly of 1e7 leaves its squares' 1e14
+    # in every later sum, and windows far away came out as 0 or negative).
+    dy = range(-r, r + 1) if axis == 1 else range(-r, r)
+    dx = range(-r, r) if axis == 1 else range(-r, r + 1)
+    out = np.zeros((h, w))
+    for oy in dy:
+        for ox in dx:
+            ys0, ys1 = max(0, -oy), min(h, h - oy)
+            xs0, xs1 = max(0, -ox), min(w, w - ox)
+            if ys0 < ys1 and xs0 < xs1:
+                out[ys0:ys1, xs0:xs1] += a[ys0 + oy:ys1 + oy, xs0 + ox:xs1 + ox]
+    return out
 
 
 #: Factors a tried by :func:`footprint_factor`: 0 and 2^-24 .. 1 (one sample), in steps of
@@ -618,6 +627,9 @@ class CheckRun:
     reference_vs_mitsuba: dict | None = None
     #: light paths and materials, for an image that fails
     decomposition: dict | None = None
+    #: the catalog's formula bugs ranked by how much of the difference each explains
+    #: (:class:`reference.suspects.SuspectRanking`), for an image that fails
+    suspects: dict | None = None
     files: dict = field(default_factory=dict)
     seconds: float = 0.0
 
@@ -627,18 +639,22 @@ class CheckRun:
                 "check": self.result.to_json(),
                 "mitsuba": None if self.mitsuba is None else self.mitsuba.to_json(),
                 "reference_vs_mitsuba": self.reference_vs_mitsuba,
-                "decomposition": self.decomposition, "files": self.files,
+                "decomposition": self.decomposition, "suspects": self.suspects,
+                "files": self.files,
                 "seconds": self.seconds}
 
 
 def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | None = None,
                 mitsuba: bool = False, seed: int = 0, reference: Reference | None = None,
-                decompose: bool = True, log=None) -> CheckRun:
+                decompose: bool = True, suspects: bool = True, log=None) -> CheckRun:
     """Judge a read image (:class:`~reference.user_image.UserImage`) against the scene's reference.
 
     ``reference`` may be given (a suite's stored image); otherwise the tracer
     renders it. ``spp`` selects the ``--spp`` noise model, ``mitsuba`` adds
-    Mitsuba's deterministic reference as a second reference.
+    Mitsuba's deterministic reference as a second reference. An image that
+    fails gets its difference split by light path and material (``decompose``)
+    and the catalog's formula bugs ranked by how much of it each explains
+    (``suspects``; :func:`reference.suspects.rank_catalog`).
     """
     import time
 
@@ -675,6 +691,13 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     if decompose and not result.passed:
         say("splitting the difference by light path and material")
         run.decomposition = decomposition(scene, result, ids, names, seed)
+    if suspects and not result.passed:
+        from reference.suspects import rank_catalog
+
+        say("ranking the catalog's formula bugs by how much of the difference each explains")
+        a = result.arrays
+        run.suspects = rank_catalog(scene, a["diff"], a["var"], a["valid"], seed,
+                                    log=log).to_json()
     run.seconds = time.perf_counter() - start
     return run
 
@@ -705,6 +728,13 @@ def format_run(run: CheckRun, title: str) -> str:
         d = run.decomposition
         out.append(format_decomposition([PathFit(**p) for p in d["light_paths"]],
                                         [MaterialPart(**m) for m in d["materials"]]))
+    if run.suspects is not None:
+        from reference.suspects import SuspectFit, format_suspects
+
+        sp = run.suspects
+        out.append(format_suspects([SuspectFit(**f) for f in sp["top"]]) +
+                   f"\n  ({sp['candidates']} bugs of the catalog reach the scene, "
+                   f"{len(sp['ranked'])} change its image; {sp['seconds']:.1f} s)")
     verdict = "PASS" if run.passed else "FAIL"
     if run.passed and run.warned:
         verdict = "PASS with a WARNING"
@@ -843,6 +873,24 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
                      f"relative error</th></tr>{rows}</table><table><tr><th>first hit</th>"
                      "<th>pixels</th>"
                      f"<th>share of the difference</th><th>bias</th></tr>{mats}</table>")
+    if run.suspects is not None:
+        sp = run.suspects
+        rows = "".join(f"<tr><td>{i}</td><td><code>{esc(f['id'])}</code>"
+                       + (f" (not told apart from {esc(', '.join(f['ties']))})"
+                          if f["ties"] else "")
+                       + (f" (same pattern, other strength: {esc(', '.join(f['alike']))})"
+                          if f["alike"] else "")
+                       + f"</td><td>{esc(f['formula'])}</td><td>{esc(f['correct'])}</td>"
+                       f"<td>{esc(f['topic'])}</td><td>{100 * f['explains']:.0f} %</td>"
+                       f"<td>{f['scale']:.2f}</td></tr>" for i, f in enumerate(sp["top"], 1))
+        parts.append("<h2>Suspects</h2><p class='meta'>The catalog's formula bugs "
+                     f"(whitted mutants --list) that reach the scene ({sp['candidates']}; "
+                     f"{len(sp['ranked'])} change its image), ranked by the share of the "
+                     "difference that the bug's image explains (R<sup>2</sup> of a least-squares "
+                     "fit weighted by the noise; strength 1: exactly that bug).</p>"
+                     "<table><tr><th>rank</th><th>bug</th><th>formula</th><th>right</th>"
+                     "<th>lecture topic</th><th>explains</th><th>strength</th></tr>"
+                     f"{rows}</table>")
     parts.append("<h2>The images</h2>")
     parts.append(viewer([("your image", a["image"]), ("reference", a["reference"])],
                         "the difference view outlines the pixels beyond the threshold in cyan",

@@ -635,7 +635,7 @@ def cmd_check(args) -> int:
                            f"{scene.name}-{Path(args.image).stem}")
     _backend(args)
     run = check_image(user, scene, args.spp, th, mitsuba=args.mitsuba, seed=args.seed,
-                      log=lambda m: print(m + " ...", flush=True))
+                      suspects=not args.no_suspects, log=lambda m: print(m + " ...", flush=True))
     title = (f"{shown(args.image)} against {scene.name} ({_describe(scene)}), read as "
              f"{user.storage}")
     write_outputs(run, outdir, title)
@@ -967,7 +967,10 @@ def build_parser() -> argparse.ArgumentParser:
                     "EXR variance layer, or from --spp N (the noise of N samples of Mitsuba's "
                     "path tracer), or is estimated from neighbouring pixels. Writes diff.png "
                     "(heat map), side_by_side.png, reference.exr, check.json and check.html "
-                    "(a viewer: hover, flip, zoom). Exit 0 when the image agrees, 1 when it "
+                    "(a viewer: hover, flip, zoom). An image that fails gets its difference "
+                    "split by light path and material, and the suspects: the three formula "
+                    "bugs of the catalog (whitted mutants --list) whose image explains most "
+                    "of it. Exit 0 when the image agrees, 1 when it "
                     "does not, 2 for bad input (an unreadable file, a size other than the "
                     "film's).")
     ck.add_argument("image", metavar="IMAGE", help="your renderer's image")
@@ -993,6 +996,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "check the tracer's reference against it")
     ck.add_argument("--seed", type=int, default=0,
                     help="seed of the reference's light samples (scenes with area lights)")
+    ck.add_argument("--no-suspects", action="store_true", dest="no_suspects",
+                    help="for an image that fails, do not rank the catalog's formula bugs "
+                         "by how much of the difference each explains (that renders the "
+                         "scene once per bug it reaches, kept in ~/.cache/whitted/suspects or "
+                         "WHITTED_SUSPECTS_CACHE)")
     ck.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     threshold_opts(ck)

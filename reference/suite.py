@@ -398,6 +398,12 @@ def update_references(result: SuiteResult, suite_dir: Path) -> list[Path]:
     return written
 
 
+def _top_suspect(run) -> dict | None:
+    """The catalog's bug that explains most of a failing image's difference (or None)."""
+    sp = getattr(run, "suspects", None)
+    return sp["top"][0] if sp and sp["top"] else None
+
+
 def format_suite(result: SuiteResult) -> str:
     lines = [f"{'scene':<22} {'image':<26} {'pixels':>9} {'max |Z|':>8}  result"]
     for g in result.graded:
@@ -408,6 +414,10 @@ def format_suite(result: SuiteResult) -> str:
         r = g.run.result
         lines.append(f"{g.name:<22} {g.image:<26} {100 * r.pixels['fraction']:>7.3f} % "
                      f"{r.regions['max_abs_z']:>8.2f}  {g.status}")
+        top = _top_suspect(g.run)
+        if top is not None:
+            lines.append(f"  suspect: {top['id']} ({top['topic']}), explains "
+                         f"{100 * top['explains']:.0f} % of the difference")
     n = sum(g.passed for g in result.graded)
     lines.append(f"{'PASS' if result.passed else 'FAIL'}: {n}/{len(result.graded)} scenes pass"
                  + (f"; not graded (no such scene): {', '.join(result.ignored)}"
@@ -455,6 +465,11 @@ def suite_page(result: SuiteResult) -> str:
                      f"{esc(r.reference)}; noise: {esc(describe_method(r, g.run.spp))}</p>"
                      "<table><tr><th>check</th><th>value vs. limit</th><th>result</th></tr>"
                      f"{result_rows(r)}</table>")
+        top = _top_suspect(g.run)
+        if top is not None:
+            parts.append(f"<p>first suspect: <code>{esc(top['id'])}</code> "
+                         f"({esc(top['topic'])}): {esc(top['formula'])}, explains "
+                         f"{100 * top['explains']:.0f} % of the difference</p>")
         parts.append(viewer([("your image", a["image"]), ("reference", a["reference"])],
                             marks=a["failing"]))
     parts.append("</body></html>\n")

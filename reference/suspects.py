@@ -17,22 +17,36 @@ difference is:
   whose camera ray first hits each material (:func:`tracer.integrator.material_ids`),
   the background and the emitters, with its share of the difference beyond
   the noise and its relative bias;
-* by suspect (:func:`rank_suspects`): candidates, each a formula bug with a
-  function rendering the reference with that bug; D ~ k (M_c - R) for each
-  candidate's image M_c, ranked by the share of D it explains. A render made
-  with one of the bugs is explained by that bug with k near 1.
+* by suspect (:func:`rank_suspects`, :func:`rank_catalog`): candidates, each
+  a formula bug with the reference rendered with that bug; D ~ k (M_c - R)
+  for each candidate's image M_c, ranked by the share of D it explains. A
+  render made with one of the bugs is explained by that bug with k near 1.
+  ``whitted check`` takes the candidates from the catalog of formula bugs
+  (:mod:`reference.mutants`): those whose switch the scene's render reaches
+  (:func:`reached_faults`), each rendered once and kept on disk
+  (:func:`mutated_image`).
 
-The share a suspect explains is its fit's explained sum of squares over
+The share a suspect explains is R^2 of its fit, the explained sum of squares
+sum w (k x)^2 over sum w D^2 (equivalently: the candidate that leaves the
+smallest weighted residual ranks first); ``beyond_noise`` divides the same by
 the part of sum w D^2 that noise does not account for (sum w D^2 minus the
-number of values, its expectation under noise alone): "explains 95 % of the
-difference beyond the noise", at most 100 %.
+number of values, its expectation under noise alone), at most 100 %. k <= 0
+(the image is off the other way from the bug) explains nothing. Two bugs
+whose images are the same on the pixels judged are ties: no image of that
+scene can tell them apart. What the ranking cannot do: name a bug the
+catalog lacks (it then names the bugs whose images look most alike, each
+explaining a part), or two bugs at once (each is fitted alone).
 """
 
 from __future__ import annotations
 
+import hashlib
 import math
+import os
+import pickle
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
 
 import numpy as np
 
@@ -185,6 +199,16 @@ def format_decomposition(paths: list[PathFit], materials: list[MaterialPart]) ->
 
 # ---------------------------------------------------------------- suspects
 
+#: Suspects printed (and put in check.json with their fits; every ranked one in ``ranked``).
+TOP = 3
+#: Two bugs' differences M - R whose weighted cosine squared is at least this are the same
+#: pattern up to a factor (within 0.1 % of its weighted energy): a fit explains the image
+#: with either as well, up to the noise, and only the strength k tells them apart (a bug at
+#: k = 1 is the image as it is; the other needs scaling). Measured: the catalog's two
+#: refraction scalings (no (n1/n2)^2, and its inverse) on a light inside glass, whose
+#: differences are 1.25 and 1.81 times one pattern.
+ALIKE = 0.999
+
 
 @dataclass(frozen=True)
 class Suspect:
@@ -197,6 +221,8 @@ class Suspect:
     formula: str
     topic: str
     render: Callable[[object], np.ndarray]
+    #: the formula as it should be
+    correct: str = ""
 
 
 @dataclass
@@ -204,11 +230,84 @@ class SuspectFit:
     id: str
     formula: str
     topic: str
-    #: share of the difference beyond noise that k (M - R) explains
+    #: R^2: the share of sum w D^2 that k (M - R) explains (0 where k <= 0: the image is
+    #: off the other way); the ranking's key (the largest leaves the smallest residual)
     explains: float
     #: the fitted strength k (1: exactly this bug)
     scale: float
     scale_error: float
+    correct: str = ""
+    #: the same explained sum of squares over the part of sum w D^2 beyond its expectation
+    #: under noise alone, at most 1
+    beyond_noise: float = 0.0
+    #: other suspects this image cannot tell from this one: their image with their bug is
+    #: the same bit for bit on the pixels judged, or the same pattern (:data:`ALIKE`) at a
+    #: strength that agrees with this one's within 3 standard errors
+    ties: list[str] = field(default_factory=list)
+    #: other suspects whose image differs from the reference in the same pattern up to a
+    #: factor (:data:`ALIKE`): told apart only by the strength (ranked nearest 1 first)
+    alike: list[str] = field(default_factory=list)
+
+
+def rank_difference(diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
+                    candidates: list[Suspect], images: list[np.ndarray],
+                    base: np.ndarray) -> list[SuspectFit]:
+    """Rank ``candidates`` by the share of ``diff`` that k (image - base) explains.
+
+    ``images`` are the candidates' renders, ``base`` the image rendered the
+    same way without a bug (the reference itself where it is deterministic;
+    for a sampled reference the render at the same seed, so that the
+    difference M - base carries the bug and not the light samples' noise).
+    Candidates whose image equals ``base`` on the judged pixels are left out
+    (the scene does not show them); candidates with the same image are ties.
+    """
+    w = _weights(var, use)
+    d = np.where(w > 0, diff, 0.0)
+    excess = _excess(d, w)
+    total = float((w * d * d).sum())
+    b = np.asarray(base, dtype=np.float64)
+    xs, kept = [], []
+    for c, m in zip(candidates, images, strict=True):
+        x = np.where(w > 0, np.asarray(m, dtype=np.float64) - b, 0.0)
+        x = np.where(np.isfinite(x), x, 0.0)
+        if not x.any():
+            continue
+        xs.append(x)
+        kept.append(c)
+    fits = []
+    for c, x in zip(kept, xs, strict=True):
+        k, se, ss = single_fit(d, x, w)
+        ss = ss if k > 0 else 0.0
+        fits.append(SuspectFit(c.id, c.formula, c.topic, min(1.0, ss / total) if total > 0 else 0.0,
+                               k, se, c.correct, _share(ss, excess)))
+    for i, x in enumerate(xs):
+        fits[i].ties = [kept[j].id for j, y in enumerate(xs) if j != i and np.array_equal(x, y)]
+    norms = [float((w * x * x).sum()) for x in xs]
+    for i, x in enumerate(xs):
+        for j in range(i + 1, len(xs)):
+            if kept[j].id in fits[i].ties:
+                continue
+            c = float((w * x * xs[j]).sum())
+            if c > 0 and c * c >= ALIKE * norms[i] * norms[j]:
+                a, b = fits[i], fits[j]
+                same = abs(a.scale - b.scale) <= 3 * math.hypot(a.scale_error, b.scale_error)
+                (a.ties if same else a.alike).append(b.id)
+                (b.ties if same else b.alike).append(a.id)
+    return _order(fits)
+
+
+def _order(fits: list[SuspectFit]) -> list[SuspectFit]:
+    """By R^2, best first; a group of alike suspects at its best one's place, by |log k|."""
+    by_id = {f.id: f for f in fits}
+    out, placed = [], set()
+    for f in sorted(fits, key=lambda f: -f.explains):
+        if f.id in placed:
+            continue
+        group = [f] + [by_id[a] for a in f.alike if a not in placed]
+        group.sort(key=lambda g: abs(math.log(g.scale)) if g.scale > 0 else math.inf)
+        out += group
+        placed.update(g.id for g in group)
+    return out
 
 
 def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
@@ -236,20 +335,183 @@ def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
             result = judge_image(UserImage("<image>", "array", "float32", u), ref)
             variance, use = result.arrays["var"], result.arrays["valid"]
     r = np.asarray(reference, dtype=np.float64)
-    w = _weights(variance, use)
-    d = np.where(w > 0, u - r, 0.0)
-    excess = _excess(d, w)
-    fits = []
-    for c in candidates:
-        x = np.where(w > 0, np.asarray(c.render(scene), dtype=np.float64) - r, 0.0)
-        k, se, ss = single_fit(d, x, w)
-        fits.append(SuspectFit(c.id, c.formula, c.topic, _share(ss, excess), k, se))
-    return sorted(fits, key=lambda f: -f.explains)
+    return rank_difference(u - r, variance, use, candidates,
+                           [c.render(scene) for c in candidates], r)
 
 
-def format_suspects(fits: list[SuspectFit], top: int = 3) -> str:
+# ------------------------------------------------------- the catalog's bugs as suspects
+
+
+def reached_faults(scene) -> frozenset[str]:
+    """The catalog switches the tracer asks about while it renders ``scene``.
+
+    Decided in Python while Dr.Jit traces (:func:`tracer.faults.recording`),
+    so a tiny film at the scene's strata asks the same questions as the full
+    one; a switch never asked about cannot change the image.
+    """
+    from tracer import faults
+    from tracer.integrator import Integrator
+
+    small = scene.with_overrides(size=(min(8, scene.film.width), min(6, scene.film.height)))
+    with faults.recording() as asked:
+        Integrator(small).render()
+    return frozenset(asked)
+
+
+def cache_dir() -> Path:
+    """Where the scenes' images with a bug are kept: ``WHITTED_SUSPECTS_CACHE``, else
+    ``$XDG_CACHE_HOME/whitted/suspects`` (``~/.cache/whitted/suspects``)."""
+    if os.environ.get("WHITTED_SUSPECTS_CACHE"):
+        return Path(os.environ["WHITTED_SUSPECTS_CACHE"])
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "whitted" / "suspects"
+
+
+_TRACER_DIGEST: str | None = None
+
+
+def _tracer_digest() -> str:
+    """A hash of the tracer's sources: a cached image is never reused by another tracer."""
+    global _TRACER_DIGEST
+    if _TRACER_DIGEST is None:
+        import tracer
+
+        h = hashlib.blake2b(digest_size=16)
+        root = Path(tracer.__file__).parent
+        for f in sorted(root.rglob("*.py")):
+            h.update(str(f.relative_to(root)).encode() + b"\0" + f.read_bytes() + b"\0")
+        _TRACER_DIGEST = h.hexdigest()
+    return _TRACER_DIGEST
+
+
+def _scene_key(scene, seed: int) -> str:
+    """A hash of everything that makes the scene's image (not its file's path), and the seed."""
+    from dataclasses import replace
+
+    h = hashlib.blake2b(digest_size=16)
+    h.update(pickle.dumps(replace(scene, path=scene.name), protocol=4))
+    h.update(f"\0{seed}\0{_tracer_digest()}".encode())
+    return h.hexdigest()
+
+
+def mutated_image(scene, fault_id: str | None, seed: int = 0, cache: Path | None = None
+                  ) -> tuple[np.ndarray, bool]:
+    """(the tracer's image of ``scene`` with the bug ``fault_id`` on, whether it was cached).
+
+    ``fault_id`` None: the tracer as written, rendered the same way (one
+    render at ``seed``). Kept as .npy under ``cache`` (:func:`cache_dir` by
+    default), keyed by the scene's content, the seed, the bug and the tracer's
+    sources.
+    """
+    from reference import mutants  # noqa: F401  (declares the catalog's ids)
+    from tracer import faults
+    from tracer.integrator import Integrator
+
+    folder = (cache or cache_dir()) / _scene_key(scene, seed)
+    path = folder / f"{fault_id or 'as-written'}.npy"
+    try:
+        return np.load(path), True
+    except (OSError, ValueError):
+        pass
+    with faults.active(*([fault_id] if fault_id else [])):
+        img = np.asarray(Integrator(scene, seed=seed).render().image, dtype=np.float32)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        tmp = folder / f".{path.stem}.{os.getpid()}.npy"
+        np.save(tmp, img)
+        os.replace(tmp, path)
+    except OSError:
+        pass   # a read-only cache only costs time
+    return img, False
+
+
+def catalog_suspects(scene, seed: int = 0, ids: list[str] | None = None) -> list[Suspect]:
+    """The catalog's bugs (:mod:`reference.mutants`) that the scene reaches, as suspects."""
+    from reference import mutants
+
+    reached = reached_faults(scene)
+    entries = mutants.CATALOG if ids is None else mutants.get(ids)
+    return [Suspect(m.id, m.wrong, m.topic,
+                    lambda s, i=m.id: mutated_image(s, i, seed)[0], m.correct)
+            for m in entries if m.id in reached]
+
+
+@dataclass
+class SuspectRanking:
+    """The catalog ranked for one failing image (``check.json``'s ``suspects``)."""
+    #: bugs of the catalog the scene reaches, and how many of their images were cached
+    candidates: int
+    cached: int
+    #: bugs the scene reaches whose image is the reference's (the scene does not show them)
+    no_effect: list[str]
+    #: every bug that changes the image, best first
+    ranked: list[SuspectFit]
+    seconds: float
+
+    @property
+    def top(self) -> list[SuspectFit]:
+        return self.ranked[:TOP]
+
+    def to_json(self) -> dict:
+        return {"candidates": self.candidates, "cached": self.cached,
+                "no_effect": self.no_effect, "top": [asdict(f) for f in self.top],
+                "ranked": [asdict(f) for f in self.ranked], "seconds": self.seconds}
+
+
+def rank_catalog(scene, diff: np.ndarray, var: np.ndarray, use: np.ndarray | None,
+                 seed: int = 0, ids: list[str] | None = None,
+                 cache: Path | None = None, log: Callable[[str], None] | None = None
+                 ) -> SuspectRanking:
+    """Rank the catalog's bugs that reach ``scene`` for a difference ``diff`` (check's arrays).
+
+    Each bug's image is rendered once per scene, seed and tracer and kept on
+    disk (:func:`mutated_image`); ``log`` gets a progress line per bug. The
+    fit takes M - R from one render with and one without the bug at the same
+    seed: where the tracer samples lights (its reference a mean of seeds) the
+    light samples' noise cancels, and a bug the scene does not show gives
+    exactly zero.
+    """
+    import time
+
+    from reference import mutants
+
+    start = time.perf_counter()
+    reached = reached_faults(scene)
+    entries = [m for m in (mutants.CATALOG if ids is None else mutants.get(ids))
+               if m.id in reached]
+    cands, images, cached = [], [], 0
+    base, hit = mutated_image(scene, None, seed, cache)
+    cached += hit
+    for i, m in enumerate(entries, 1):
+        try:
+            img, hit = mutated_image(scene, m.id, seed, cache)
+        except Exception as e:   # a bug that crashes the tracer cannot be a suspect here
+            if log:
+                log(f"suspects [{i}/{len(entries)}] {m.id}: not rendered ({type(e).__name__})")
+            continue
+        cached += hit
+        if log:
+            log(f"suspects [{i}/{len(entries)}] {m.id}" + (" (cached)" if hit else ""))
+        cands.append(Suspect(m.id, m.wrong, m.topic, lambda s: None, m.correct))
+        images.append(img)
+    ranked = rank_difference(diff, var, use, cands, images, base)
+    ranked_ids = {f.id for f in ranked}
+    return SuspectRanking(len(entries), cached, [c.id for c in cands if c.id not in ranked_ids],
+                          ranked, time.perf_counter() - start)
+
+
+def format_suspects(fits: list[SuspectFit], top: int = TOP) -> str:
     lines = ["suspects (formula bugs whose image explains the difference best):"]
     for i, f in enumerate(fits[:top], 1):
-        lines.append(f"  {i}. {f.id}: {f.formula} (lecture: {f.topic}) explains "
-                     f"{100 * f.explains:.0f} % of the difference, at strength {f.scale:.2f}")
+        ties = f"; not told apart from {', '.join(f.ties)}" if f.ties else ""
+        if f.alike:
+            ties += f"; the same pattern, other strength, as {', '.join(f.alike)}"
+        lines.append(f"  {i}. {f.id} (lecture: {f.topic}): explains {100 * f.explains:.1f} % "
+                     f"of the difference ({100 * f.beyond_noise:.0f} % of what noise leaves), "
+                     f"at strength {f.scale:.2f}{ties}")
+        lines.append(f"       formula: {f.formula}")
+        if f.correct:
+            lines.append(f"       right:   {f.correct}")
+    if not fits:
+        lines.append("  none: no bug of the catalog that the scene reaches changes its image")
     return "\n".join(lines)

@@ -26,6 +26,21 @@ def pytest_configure(config):
     b = config.getoption("--backend")
     if b:
         os.environ["WHITTED_BACKEND"] = b
+    # whitted check's images of scenes with a formula bug: kept for the run, not in ~/.cache
+    if not os.environ.get("WHITTED_SUSPECTS_CACHE"):
+        import tempfile
+
+        os.environ["WHITTED_SUSPECTS_CACHE"] = tempfile.mkdtemp(prefix="whitted-suspects-")
+        config._whitted_suspects_cache = os.environ["WHITTED_SUSPECTS_CACHE"]
+
+
+def pytest_unconfigure(config):
+    made = getattr(config, "_whitted_suspects_cache", None)
+    if made:
+        import shutil
+
+        shutil.rmtree(made, ignore_errors=True)
+        os.environ.pop("WHITTED_SUSPECTS_CACHE", None)
 
 
 @pytest.fixture(scope="session")

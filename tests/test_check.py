@@ -221,6 +221,16 @@ def test_local_variance_leaves_the_pixel_itself_out():
     assert v[4, 4] == 0 and v[4, 5] > 0
 
 
+def test_local_variance_far_from_a_firefly_is_the_noise_around_it():
+    # One pixel 1e7 off (an unnormalised highlight) must not change the estimate of
+    # windows that do not hold it: a summed-area table lost them (0 beyond it).
+    rng = np.random.default_rng(3)
+    d = rng.normal(0, 1e-3, (48, 64))
+    far = local_variance(d)[20:, 20:]
+    d[5, 5] = 5.5e7
+    assert np.allclose(local_variance(d)[20:, 20:], far, rtol=1e-9, atol=0)
+
+
 def test_rounding_bias_bound_is_half_a_step_without_noise_and_vanishes_with_it():
     b = rounding_bias_bound(np.array([0.0, 0.1, 0.5, 1.0]))
     assert b[0] == 0.5 and 0.3 < b[1] < 0.5
@@ -323,11 +333,14 @@ def test_an_image_with_a_formula_bug_fails_from_the_command_line(tmp_path, monke
     scene = _scene("sphere_point")
     write_png(tmp_path / "bug.png", _render_with(monkeypatch, scene, lights, "lambert_cosine",
                                                  _no_cosine))
-    r = run_cli("check", tmp_path / "bug.png", "--scene", "sphere_point", "-o", tmp_path / "o")
+    r = run_cli("check", tmp_path / "bug.png", "--scene", "sphere_point", "-o", tmp_path / "o",
+                "--no-suspects")
     assert r.returncode == 1, r.stdout + r.stderr
     assert "FAIL" in r.stdout and "where the difference sits" in r.stdout
+    assert "suspects" not in r.stdout          # --no-suspects: the catalog is not ranked
     data = json.loads((tmp_path / "o" / "check.json").read_text())
     assert data["pass"] is False and data["check"]["method"] == "local"
+    assert data["suspects"] is None
     assert {"diff.png", "side_by_side.png", "check.html", "reference.exr"} <= {
         p.name for p in (tmp_path / "o").iterdir()}
 
@@ -372,7 +385,7 @@ def test_suspects_are_ranked_with_the_injected_bug_first(monkeypatch):
         noisy = image + rng.normal(0, 0.01 * ref.image.mean(), image.shape)
         fits = rank_suspects(noisy, scene, candidates, reference=ref.image)
         assert fits[0].id == bug_id, format_suspects(fits)
-        assert fits[0].explains > 0.9 and abs(fits[0].scale - 1) < 0.05
+        assert fits[0].beyond_noise > 0.9 and abs(fits[0].scale - 1) < 0.05
         assert "lecture:" in format_suspects(fits)
 
 

@@ -109,7 +109,12 @@ def test_suite_check_grades_a_folder_and_update_refuses_a_failing_run(suite_dir,
     status = {s["name"]: s["status"] for s in data["scenes"]}
     assert status == {"glass_sphere": "FAIL", "sphere_point": "pass"}
     assert data["ignored"] == ["unrelated.png"]
+    # The failing image is explained by the catalog's bug that does the same
+    assert "suspect: schlick-for-exact" in r.stdout, r.stdout
+    glass = next(s for s in data["scenes"] if s["name"] == "glass_sphere")
+    assert glass["check"]["suspects"]["top"][0]["id"] == "schlick-for-exact"
     page = (images / "whitted-check" / "index.html").read_text()
+    assert "first suspect: <code>schlick-for-exact</code>" in page
     assert page.count("class='wv'") == 2 and "http" not in page.split("<body>")[1]
     # A missing image fails too.
     (images / "glass_sphere.exr").unlink()

@@ -1,0 +1,168 @@
+"""How often `whitted check` names a known formula bug first: the suspects' hit rate.
+
+For each bug of the catalog (``reference/mutants.py``) the first built-in
+scene (in ``whitted scenes`` order) where the tracer with that bug fails
+``whitted check`` stands in for a user's renderer: the image is the tracer's
+render with the bug switched on (at another seed than the reference's where
+lights are sampled, so its light samples are its own), plus Gaussian noise of
+``--noise`` times the image's mean (a renderer's own sampling noise; its
+variance is left for the check to estimate from the image, as for any image
+without a variance layer, or given to it with ``--variance``, as an EXR's
+variance layer gives it). The same noise on the tracer as written must
+pass the check (the control; a scene where it does not is left out and
+listed). The check then ranks the catalog's bugs that
+reach the scene (:func:`reference.suspects.rank_catalog`), and the bug's rank
+is counted:
+
+* a hit at rank 1 when it is first, or tied with the first (a tie: the two
+  bugs give the very same image on that scene, or the same pattern at
+  strengths that agree within their errors, so the image cannot tell them
+  apart; reported as such);
+* a hit in the top three likewise;
+* a miss otherwise, printed with the bug that came first and the shares
+  both explain.
+
+Bugs the tracer's image does not show on any scene (the check passes
+everywhere) are listed apart: they cannot be named from an image.
+
+    python benchmarks/bench_suspects.py [--width 64] [--spp 16] [--noise 0.01] [--variance]
+                                        [--only ID,...]
+
+The sizes are the catalog sweep's quick ones (``reference.mutants.sweep_size``).
+Each bug's image is kept in the suspects' cache (``~/.cache/whitted/suspects``;
+``--cache DIR`` for another), so a second run takes a fraction of the first.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+
+import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+
+#: The user's image's seed where the tracer samples lights (the reference's is 0).
+USER_SEED = 7
+
+
+def main(argv=None) -> int:
+    import numpy as np
+
+    from reference import mutants
+    from reference.check import check_image, tracer_reference
+    from reference.cli import builtin_scenes
+    from reference.suspects import mutated_image, reached_faults
+    from reference.user_image import UserImage
+    from tracer import load_scene
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--width", type=int, default=mutants.QUICK_WIDTH)
+    p.add_argument("--spp", type=int, default=mutants.QUICK_SPP)
+    p.add_argument("--noise", type=float, default=0.01,
+                   help="Gaussian noise added to the bug's image, times the image's mean")
+    p.add_argument("--variance", action="store_true",
+                   help="give the check the noise's variance (as an EXR variance layer) "
+                        "instead of letting it estimate the noise from the image")
+    p.add_argument("--only", default=None, help="comma-separated bug ids (default: all)")
+    p.add_argument("--cache", type=Path, default=None, help="cache folder of the bugs' images")
+    args = p.parse_args(argv)
+
+    if args.cache is not None:
+        import os
+
+        os.environ["WHITTED_SUSPECTS_CACHE"] = str(args.cache)
+    todo = [m.id for m in (mutants.get(args.only.split(",")) if args.only else mutants.CATALOG)]
+    start = time.perf_counter()
+    rng = np.random.default_rng(1)
+    results = {}          # id -> (scene, rank, top id, top share, own share, ties)
+    false_alarms = []     # scenes whose tracer as written fails with the noise added
+    for path in builtin_scenes():
+        if not todo:
+            break
+        scene = load_scene(path)
+        w, h = scene.film.width, scene.film.height
+        if w > args.width:
+            scene = scene.with_overrides(size=(args.width, max(8, round(h * args.width / w))))
+        scene = scene.with_overrides(spp=min(scene.film.spp, args.spp))
+        here = [i for i in todo if i in reached_faults(scene)]
+        if not here:
+            continue
+        ref = tracer_reference(scene)
+        seed = USER_SEED if scene.samples_lights() else 0
+        clean, _ = mutated_image(scene, None, seed)
+        sigma = args.noise * abs(float(clean.mean()))
+        noise = rng.normal(0, sigma, clean.shape) if sigma > 0 else 0.0
+
+        var = np.full(clean.shape, sigma ** 2) if args.variance and sigma > 0 else None
+
+        def check(img, label, scene=scene, ref=ref, noise=noise, var=var):
+            return check_image(UserImage(label, "array", "float32",
+                                         img.astype(np.float64) + noise, variance=var),
+                               scene, reference=ref, decompose=False)
+
+        # The control: the tracer as written with the same noise must pass, or a failure
+        # with a bug on says nothing about the bug.
+        if not check(clean, "<as written>").passed:
+            false_alarms.append(scene.name)
+            continue
+        for fid in here:
+            img, _ = mutated_image(scene, fid, seed)
+            run = check(img, f"<{fid}>")
+            if run.passed:
+                continue       # this scene does not show the bug: try the next one
+            todo.remove(fid)
+            ranked = run.suspects["ranked"]
+            ids = [f["id"] for f in ranked]
+            rank = ids.index(fid) + 1 if fid in ids else None
+            top = ranked[0] if ranked else None
+            first_ties = set(top["ties"]) | {top["id"]} if top else set()
+            top3 = set()
+            for f in ranked[:3]:
+                top3 |= {f["id"], *f["ties"]}
+            own = ranked[rank - 1]["explains"] if rank else 0.0
+            results[fid] = {"scene": scene.name, "rank": rank, "first": fid in first_ties,
+                            "top3": fid in top3, "top": top["id"] if top else None,
+                            "top_explains": top["explains"] if top else 0.0,
+                            "explains": own, "ties": ranked[rank - 1]["ties"] if rank else [],
+                            "strength": ranked[rank - 1]["scale"] if rank else None}
+            r = results[fid]
+            print(f"{fid:<38} {scene.name:<22} rank {rank if rank else '-':>2}  "
+                  f"explains {100 * own:5.1f} %  strength {r['strength'] or 0:5.2f}"
+                  + (f"  tied with {', '.join(r['ties'])}" if r["ties"] else "")
+                  + ("" if r["first"] else
+                     f"  first: {r['top']} ({100 * r['top_explains']:.1f} %)"),
+                  flush=True)
+    shown = len(results)
+    first = sum(r["first"] for r in results.values())
+    top3 = sum(r["top3"] for r in results.values())
+    tied = [i for i, r in results.items() if r["first"] and r["ties"]]
+    print()
+    print(f"hit rate: {first}/{shown} bugs named first ({100 * first / max(shown, 1):.0f} %), "
+          f"{top3}/{shown} in the top three ({100 * top3 / max(shown, 1):.0f} %); "
+          f"noise {args.noise:g} x the mean"
+          + (", its variance given" if args.variance else ", estimated by the check")
+          + f", width {args.width}, at most {args.spp} spp; "
+          f"{time.perf_counter() - start:.0f} s")
+    if tied:
+        print("named first in a tie (another bug's image on that scene is the same, or the "
+              "same pattern at a strength within the errors): "
+              + "; ".join(f"{i} = {', '.join(results[i]['ties'])} ({results[i]['scene']})"
+                          for i in tied))
+    misses = [i for i, r in results.items() if not r["first"]]
+    for i in misses:
+        r = results[i]
+        print(f"miss: {i} on {r['scene']}: rank {r['rank']}, explains {100 * r['explains']:.1f} %"
+              f"; first {r['top']} explains {100 * r['top_explains']:.1f} %")
+    if false_alarms:
+        print("scenes left out: the tracer as written with the same noise fails the check "
+              f"there (a false alarm): {', '.join(false_alarms)}")
+    if todo:
+        print(f"not shown by any scene (the check passes with the bug on): {', '.join(todo)}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
