@@ -105,6 +105,10 @@ CATALOG: tuple[Mutant, ...] = (
        "R = R0 + (1 - R0)(1 - cos theta)^5 with theta the angle on the less dense side "
        "(theta_t when leaving glass), R = 1 beyond the critical angle",
        L1, "The Fresnel equation (simplified)", "tracer/fresnel.py: fresnel_schlick"),
+    _m("conductor-k-ignored",
+       "A metal's Fresnel term drops the extinction coefficient k, as if it were glass.",
+       "R = R_dielectric(eta)", "R = (R_s + R_p) / 2 with the complex index eta + i k",
+       L1, "The Fresnel equation", "tracer/fresnel.py: fresnel_conductor"),
     _m("snell-eta-inverted",
        "Snell's law with the ratio of the indices upside down.",
        "sin theta_t = (n2 / n1) sin theta_i", "n1 sin theta_i = n2 sin theta_t",

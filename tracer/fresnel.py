@@ -123,3 +123,38 @@ def refract(d, n, eta):
     inv = dr.rcp(rel)
     t = inv * d + (inv * c - cos_t) * n_facing
     return t, tir
+
+
+def fresnel_conductor(cos_i, eta, k):
+    """Fresnel reflectance of unpolarised light at a smooth conductor, per channel.
+
+    The conductor's complex index eta + i k relative to the outside (pbrt-v4,
+    section 9.3, ``FrComplex``: the dielectric equations with a complex n_t and
+    cos_t = sqrt(1 - sin^2(theta_i) / (eta + i k)^2)). Written in real
+    arithmetic (Born and Wolf, "Principles of Optics", 7th ed., section 14.2;
+    Mitsuba 3's ``fresnel_conductor``): with s2 = sin^2(theta_i), c = |cos_i|,
+
+        a^2 + b^2 = sqrt((eta^2 - k^2 - s2)^2 + 4 eta^2 k^2),
+        a = sqrt((a^2 + b^2 + eta^2 - k^2 - s2) / 2),
+        R_s = (a^2 + b^2 + c^2 - 2 a c) / (a^2 + b^2 + c^2 + 2 a c),
+        R_p = R_s (c^2 (a^2 + b^2) + s2^2 - 2 a c s2) / (c^2 (a^2 + b^2) + s2^2 + 2 a c s2),
+        R = (R_s + R_p) / 2.
+
+    k = 0 gives the dielectric's R (below its critical angle); eta = 0, k = 1
+    gives R = 1 at every angle (Mitsuba's ``material = "none"``).
+    """
+    if faults.on("conductor-k-ignored"):
+        k = k * 0
+    c = dr.minimum(dr.abs(cos_i), 1)
+    c2 = c * c
+    s2 = 1 - c2
+    s4 = s2 * s2
+    t1 = eta * eta - k * k - s2
+    a2b2 = dr.safe_sqrt(t1 * t1 + 4 * eta * eta * k * k)
+    a = dr.safe_sqrt(0.5 * (a2b2 + t1))
+    t2 = 2 * c * a
+    r_s = (a2b2 + c2 - t2) / (a2b2 + c2 + t2)
+    t3 = a2b2 * c2 + s4
+    t4 = t2 * s2
+    r_p = r_s * (t3 - t4) / (t3 + t4)
+    return 0.5 * (r_s + r_p)

@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.materials import classic, dielectric, diffuse, mirror, phong
+from reference.materials import classic, conductor, dielectric, diffuse, mirror, phong
 from reference.mitsuba_tree import rgb
 from tracer.errors import UserError
 from tracer.materials import type_of
@@ -27,6 +27,7 @@ from tracer.materials import type_of
 REGISTRY: dict[str, ModuleType] = {
     "diffuse": diffuse,
     "mirror": mirror,
+    "conductor": conductor,
     "dielectric": dielectric,
     "phong": phong,
     "classic": classic,

@@ -176,6 +176,31 @@ class BSDF:
         return [] if value is None else [(value, self.emission_letters)]
 
 
+# --------------------------------------------------------------------------- parsing
+
+
+def parse_ior(t, key: str, default: float) -> float:
+    """An index of refraction: a positive number or one of Mitsuba's names (``tracer.ior``)."""
+    from tracer.ior import DIELECTRICS
+
+    v = t.raw(key, default)
+    if isinstance(v, str):
+        if v not in DIELECTRICS:
+            t.fail(key, f"unknown index of refraction {v!r} (a number, or one of "
+                        f"{', '.join(DIELECTRICS)})")
+        return DIELECTRICS[v]
+    return t.number(key, default, lo=0, lo_open=True)
+
+
+def parse_two_sided(t) -> bool:
+    """``two_sided`` (default true): false makes the surface black from behind, as a bare
+    Mitsuba BSDF is (behind: the side the shading normal points away from)."""
+    v = t.raw("two_sided", True)
+    if not isinstance(v, bool):
+        t.fail("two_sided", f"expected true or false, got {v!r}")
+    return v
+
+
 # --------------------------------------------------------------------------- tables
 
 

@@ -121,6 +121,11 @@ class SceneMaterials:
         self.kind = jit.UInt32(np.asarray(kind, dtype=np.uint32))
         self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
         self.has_smooth = any(k.smooth for k in self.kinds)
+        # Materials with ``two_sided = false`` are black where the ray arrives from behind
+        # (the side the shading normal points away from), as a bare Mitsuba BSDF is.
+        one_sided = [getattr(m, "two_sided", True) is False for m in materials]
+        self.has_one_sided = any(one_sided)
+        self.one_sided = jit.Bool(np.asarray(one_sided + [False], dtype=bool))
         self.has_delta = any(k.lobes for k in self.kinds)
 
     def at(self, mid, si: ShadingPoint, valid) -> Closure:
@@ -128,6 +133,8 @@ class SceneMaterials:
         kind = dr.gather(jit.UInt32, self.kind, mid, valid)
         row = dr.gather(jit.UInt32, self.row, mid, valid)
         parts = []
+        if self.has_one_sided:  # black from behind: no kind answers for those lanes
+            valid = valid & ~(dr.gather(jit.Bool, self.one_sided, mid, valid) & (si.cos_i < 0))
         for i, bsdf in enumerate(self.kinds):
             mask = valid & (kind == i)
             parts.append((bsdf, mask, bsdf.params(row, si, mask)))
