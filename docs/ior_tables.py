@@ -19,6 +19,8 @@ from __future__ import annotations
 import glob
 import os
 
+import numpy as np
+
 DIELECTRIC_NAMES = ("vacuum", "helium", "hydrogen", "air", "carbon dioxide", "water",
                     "acetone", "ethanol", "carbon tetrachloride", "glycerol", "benzene",
                     "silicone oil", "bromine", "water ice", "fused quartz", "pyrex",
@@ -34,13 +36,13 @@ def conductor_names(mi) -> list[str]:
 
 def conductor_rgb(mi, name: str):
     p = mi.traverse(mi.load_dict({"type": "conductor", "material": name}))
-    return (tuple(round(float(x), 6) for x in p["eta.value"]),
-            tuple(round(float(x), 6) for x in p["k.value"]))
+    return (tuple(round(float(x), 6) for x in np.ravel(p["eta.value"])),
+            tuple(round(float(x), 6) for x in np.ravel(p["k.value"])))
 
 
 def dielectric_ior(mi, name: str) -> float:
     p = mi.traverse(mi.load_dict({"type": "dielectric", "int_ior": name, "ext_ior": 1.0}))
-    return round(float(p["eta"]), 6)
+    return round(float(np.ravel(p["eta"])[0]), 6)
 
 
 def main() -> None:
