@@ -183,13 +183,11 @@ class DeterministicReference:
                     u = light.sample_map(mi.Point2f(t), mi)
                 contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth)
             if terms.spawns_children(depth):
-                flags = bsdf.flags()
-                for flag, lobe_ctx in terms.lobes:
-                    follow = delta & mi.has_flag(flags, flag)
-                    bs, weight = bsdf.sample(lobe_ctx, si, 0.5, mi.Point2f(0.5, 0.5), follow)
+                for flag in terms.lobes:
+                    wo, weight, keep = terms.lobe(bsdf, si, flag, delta)
                     w = beta * weight
-                    keep = follow & (bs.pdf > 0) & (dr.max(w) > 0)
-                    children.append((si.spawn_ray(si.to_world(bs.wo)), w, keep))
+                    keep &= dr.max(w) > 0
+                    children.append((si.spawn_ray(wo), w, keep))
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, slot)
         if not children:
             dr.eval(L)

@@ -50,7 +50,8 @@ def test_conductor_fresnel_matches_mitsuba_within_float32_rounding(mi):
 
 
 def _material(table: dict):
-    scene = parse_scene({"film": {"width": 8, "height": 8}, "camera": {"origin": [0, 0, 5], "target": [0, 0, 0]},
+    scene = parse_scene({"film": {"width": 8, "height": 8},
+                         "camera": {"origin": [0, 0, 5], "target": [0, 0, 0]},
                          "materials": {"m": table},
                          "lights": [{"type": "point", "position": [0, 1, 0], "intensity": 1}],
                          "shapes": [{"type": "sphere", "material": "m"}]})

@@ -158,3 +158,19 @@ def fresnel_conductor(cos_i, eta, k):
     t4 = t2 * s2
     r_p = r_s * (t3 - t4) / (t3 + t4)
     return 0.5 * (r_s + r_p)
+
+
+def thin_slab_reflectance(r):
+    """Reflectance of a thin slab from its single-boundary R: R + T^2 R / (1 - R^2) = 2R / (1 + R).
+
+    A ray entering the slab (T = 1 - R) bounces between its two faces; every
+    odd number of inner reflections leaves it on the side it came from, so
+    R' = R + T^2 R (1 + R^2 + R^4 + ...) = R + T^2 R / (1 - R^2), which is
+    2R / (1 + R) (the geometric series of inner reflections; pbrt-v4,
+    section 9.5.4 ``ThinDielectricBxDF``; Mitsuba 3's ``thindielectric``). The
+    transmittance is 1 - R' = (1 - R) / (1 + R); the ray leaves the slab along its
+    own direction, the slab being thin.
+    """
+    if faults.on("thin-slab-single-reflection"):
+        return r
+    return 2 * r / (1 + r)

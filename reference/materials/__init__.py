@@ -18,7 +18,15 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.materials import classic, conductor, dielectric, diffuse, mirror, phong
+from reference.materials import (
+    classic,
+    conductor,
+    dielectric,
+    diffuse,
+    mirror,
+    phong,
+    thindielectric,
+)
 from reference.mitsuba_tree import rgb
 from tracer.errors import UserError
 from tracer.materials import type_of
@@ -29,6 +37,7 @@ REGISTRY: dict[str, ModuleType] = {
     "mirror": mirror,
     "conductor": conductor,
     "dielectric": dielectric,
+    "thindielectric": thindielectric,
     "phong": phong,
     "classic": classic,
 }

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.materials import classic, conductor, dielectric, diffuse, mirror, phong
+from tracer.materials import classic, conductor, dielectric, diffuse, mirror, phong, thindielectric
 from tracer.materials.base import MaterialModel
 
 #: TOML ``type`` -> the module of that kind (one line per kind).
@@ -29,6 +29,7 @@ REGISTRY: dict[str, ModuleType] = {
     "mirror": mirror,
     "conductor": conductor,
     "dielectric": dielectric,
+    "thindielectric": thindielectric,
     "phong": phong,
     "classic": classic,
 }
