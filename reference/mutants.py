@@ -147,6 +147,12 @@ CATALOG: tuple[Mutant, ...] = (
        "L_t = (n1 / n2)^2 L", "L_t = (1 - R) (n1 / n2)^2 L",
        L1, "The Fresnel equation", "tracer/materials/dielectric.py: BSDF.delta_lobes"),
     # --- Lambert, attenuation, lights ------------------------------------------------------
+    _m("mask-passthrough-unweighted",
+       "A partly transparent surface lets the ray through at full weight, on top of its own "
+       "share.",
+       "L = a L_surface + L_behind", "L = a L_surface + (1 - a) L_behind (a = opacity)",
+       L1, "The Illumination Equation with recursion",
+       "tracer/materials/dispatch.py: Closure.delta_lobes"),
     _m("lambert-no-cosine",
        "Diffuse shading without Lambert's cosine.",
        "L = f E", "L = f E cos theta, cos theta = N . L",

@@ -747,8 +747,9 @@ _texture = parse_texture
 def _parse_material(t: _Table, name: str) -> Material:
     kind = t.string("type", choices=tuple(_materials.REGISTRY))
     m = _materials.REGISTRY[kind].parse(t, name)
+    opacity = t.number("opacity", 1.0, lo=0, hi=1)
     t.finish()
-    return m
+    return replace(m, opacity=opacity) if opacity != 1 else m
 
 
 def _parse_light(t: _Table) -> Light:

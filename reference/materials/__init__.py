@@ -67,7 +67,10 @@ def bsdf_tree(material, models: bool = False) -> dict:
     if material is None:
         return BLACK
     model = tracer_only_model(material) if models else None
-    return model if model is not None else convert(material, "mitsuba")
+    tree = model if model is not None else convert(material, "mitsuba")
+    if material.opacity != 1:  # every kind: Mitsuba's mask around its BSDF
+        tree = {"type": "mask", "opacity": ("float", material.opacity), "material": tree}
+    return tree
 
 
 def tracer_only_model(material) -> dict | None:
