@@ -71,3 +71,16 @@ def test_named_iors_and_conductors_are_read_and_unknown_names_refused():
         _material({"type": "conductor", "material": "Au", "eta": 1, "k": 1})
     with pytest.raises(SceneError, match="two_sided"):
         _material({"type": "diffuse", "two_sided": 0})
+
+
+def test_diffuse_fresnel_reflectance_fit_is_mitsubas(mi, jit):
+    # Both evaluate the same two published fits in float32 (tracer.fresnel docstring):
+    # a few ulps of F_dr <= 1 apart at most (8 ulp of 1 = 1e-6).
+    from tracer import fresnel
+
+    eta = np.linspace(0.2, 5, 400, dtype=np.float32)
+    ours = np.asarray(fresnel.fresnel_diffuse_reflectance(jit.Float(eta)))
+    theirs = np.asarray(mi.fresnel_diffuse_reflectance(mi.Float(eta)))
+    assert np.abs(ours - theirs).max() <= 1e-6
+    # F_dr grows from 0 at eta = 1 (no boundary) towards 1 (nearly all light trapped).
+    assert ours[np.argmin(np.abs(eta - 1))] < 1e-3 and ours[0] > 0.9

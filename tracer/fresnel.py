@@ -12,6 +12,8 @@ Computer Graphics Forum 13(3), 1994; Pharr, Jakob, Humphreys, "Physically Based
 Rendering", 4th ed., section 9.5 (dielectric BSDF).
 """
 
+import math
+
 import drjit as dr
 
 from tracer import faults
@@ -174,3 +176,49 @@ def thin_slab_reflectance(r):
     if faults.on("thin-slab-single-reflection"):
         return r
     return 2 * r / (1 + r)
+
+
+def fresnel_diffuse_reflectance(eta):
+    """The hemispherical average of the Fresnel reflectance for diffuse light, F_dr(eta).
+
+    Light arriving from all directions of a hemisphere (cosine-weighted) at a
+    boundary with relative index eta (n_t / n_i) is reflected with
+    F_dr = 2 * integral of R(cos) cos dcos. Fitted rather than integrated, as
+    Mitsuba 3 does (``fresnel_diffuse_reflectance``), so that both agree to
+    float precision: for eta < 1 the fit of Egan and Hilgeman ("Optical
+    Properties of Inhomogeneous Materials", 1979; the form in Jensen et al.,
+    "A Practical Model for Subsurface Light Transport", SIGGRAPH 2001, eq. 9,
+    written there for 1 / eta)
+    -1.4399 eta^2 + 0.7099 eta + 0.6681 + 0.0636 / eta; for eta >= 1 the
+    polynomial in 1 / eta of d'Eon and Irving ("A Quantized-Diffusion Model
+    for Rendering Translucent Materials", SIGGRAPH 2011, section 5.1)
+    0.919317 - 3.4793 x + 6.75335 x^2 - 7.80989 x^3 + 4.98554 x^4 - 1.36881 x^5.
+    """
+    x = dr.rcp(eta)
+    low = dr.fma(0.0636, x, dr.fma(eta, dr.fma(eta, -1.4399, 0.7099), 0.6681))
+    high = dr.fma(x, dr.fma(x, dr.fma(x, dr.fma(x, dr.fma(x, -1.36881, 4.98554), -7.80989),
+                                         6.75335), -3.4793), 0.919317)
+    return dr.select(eta < 1, low, high)
+
+
+def plastic_diffuse(kd, f_i, f_o, eta, fdr_int, nonlinear):
+    """The diffuse part of a smooth plastic, without the cosine (Mitsuba 3's ``plastic``).
+
+    A Lambertian base under a smooth dielectric coating of relative index
+    eta (Weidlich and Wilkie, "Arbitrarily Layered Micro-Facet Surfaces",
+    GRAPHITE 2007, in the smooth limit): light enters through the coating
+    with (1 - F_i), is scattered by the base, and leaves with (1 - F_o), the
+    radiance scaled by 1 / eta^2 as it leaves the denser medium (Veach's
+    thesis, section 5.2). Light the coating reflects back inside (F_dr, the
+    internal diffuse Fresnel reflectance, :func:`fresnel_diffuse_reflectance`
+    of 1 / eta) is scattered again: the geometric series gives
+    kd / (1 - F_dr) when that light is taken as leaving with the base's own
+    spectrum (linear), kd / (1 - kd F_dr) when each bounce takes the base's
+    colour again (``nonlinear``, the saturating of wet or varnished
+    surfaces). f = kd' (1 - F_i)(1 - F_o) / (eta^2 pi).
+    """
+    if faults.on("plastic-no-internal-scattering"):
+        kd_eff = kd
+    else:
+        kd_eff = kd / (1 - dr.select(nonlinear, kd, 1.0) * fdr_int)
+    return kd_eff * ((1 - f_i) * (1 - f_o) / (eta * eta * math.pi))

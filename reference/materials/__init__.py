@@ -25,6 +25,7 @@ from reference.materials import (
     diffuse,
     mirror,
     phong,
+    plastic,
     thindielectric,
 )
 from reference.mitsuba_tree import rgb
@@ -38,6 +39,7 @@ REGISTRY: dict[str, ModuleType] = {
     "conductor": conductor,
     "dielectric": dielectric,
     "thindielectric": thindielectric,
+    "plastic": plastic,
     "phong": phong,
     "classic": classic,
 }

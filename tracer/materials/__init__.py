@@ -20,7 +20,16 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.materials import classic, conductor, dielectric, diffuse, mirror, phong, thindielectric
+from tracer.materials import (
+    classic,
+    conductor,
+    dielectric,
+    diffuse,
+    mirror,
+    phong,
+    plastic,
+    thindielectric,
+)
 from tracer.materials.base import MaterialModel
 
 #: TOML ``type`` -> the module of that kind (one line per kind).
@@ -30,6 +39,7 @@ REGISTRY: dict[str, ModuleType] = {
     "conductor": conductor,
     "dielectric": dielectric,
     "thindielectric": thindielectric,
+    "plastic": plastic,
     "phong": phong,
     "classic": classic,
 }
