@@ -212,7 +212,7 @@ class _Triangles(_Flat):
                              lambda k: dr.gather(jit.Float, self.cdf, k) <= ux)
         lo = dr.gather(jit.Float, self.lo, i)
         share = dr.gather(jit.Float, self.cdf, i) - lo
-        ux = dr.clamp((ux - lo) / dr.maximum(share, 1e-30), 0, 0.99999994)
+        ux = dr.clip((ux - lo) / dr.maximum(share, 1e-30), 0, 0.99999994)
         self.n = dr.gather(jit.Array3f, self.normals, i)
         self._tri = (dr.gather(jit.Array3f, self.p0, i), dr.gather(jit.Array3f, self.e1, i),
                      dr.gather(jit.Array3f, self.e2, i))
