@@ -101,9 +101,20 @@ def shares_light_samples(scene: Scene) -> bool:
     """
     from tracer.emitters import LIGHTS, type_of
 
-    if any(not LIGHTS[type_of(light)].Emitter.delta for light in scene.lights):
+    if any(_light_sample_map(light) is None for light in scene.lights
+           if not LIGHTS[type_of(light)].Emitter.delta and
+           LIGHTS[type_of(light)].Emitter.illuminates):
         return False
     return all(type(s) in SAMPLE_MAPS for s in scene.shapes if s.emitter is not None)
+
+
+def _light_sample_map(light) -> Callable | None:
+    """The sample map of a ``[[lights]]`` kind Mitsuba samples as the tracer does (the
+    ``sample_map`` of its conversion module, ``reference/emitters/``), or None."""
+    from reference.emitters import REGISTRY
+    from tracer.emitters import type_of
+
+    return getattr(REGISTRY[type_of(light)], "sample_map", None)
 
 
 @dataclass
@@ -123,10 +134,22 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
     tracer's points of the same light. Others (an environment that lights
     nothing) are handed any sample.
     """
+    from tracer.emitters import LIGHTS, type_of
+
     emitting = [i for i, s in enumerate(scene.shapes) if s.emitter is not None]
+    # The tracer numbers its sampled lights: sampled [[lights]] first, then area emitters.
+    sampled = [i for i, light in enumerate(scene.lights)
+               if not LIGHTS[type_of(light)].Emitter.delta]
     out = []
     for e in ms.emitters():
         shape = e.get_shape()
+        if shape is None and e.id().startswith("light_") and not mi.has_flag(
+                e.flags(), mi.EmitterFlags.Delta):
+            k = int(e.id().removeprefix("light_"))
+            sample_map = _light_sample_map(scene.lights[k])
+            if sample_map is not None:  # a light at infinity sampled as the tracer does
+                out.append(_Light(e, sampled.index(k), sample_map))
+                continue
         if shape is None or mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             out.append(_Light(e, None, None))
             continue
@@ -134,7 +157,7 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
         kind = type(scene.shapes[k])
         if kind not in SAMPLE_MAPS:
             raise NotImplementedError(f"no shared light samples for {kind.__name__} emitters")
-        out.append(_Light(e, emitting.index(k), SAMPLE_MAPS[kind]))
+        out.append(_Light(e, len(sampled) + emitting.index(k), SAMPLE_MAPS[kind]))
     return out
 
 

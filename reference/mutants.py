@@ -212,6 +212,11 @@ CATALOG: tuple[Mutant, ...] = (
        "azimuth's 2 pi.",
        "pdf = 1 / (pi (1 - cos theta_max))", "pdf = 1 / (2 pi (1 - cos theta_max))",
        L1, "Quick radiometry recap", "tracer/lights.py: sample_cone"),
+    _m("sphere-direction-z-squared",
+       "Directions towards a constant sky are drawn with z = 1 - 2 u^2, crowding them "
+       "towards the zenith, but weighted as uniform.",
+       "z = 1 - 2 u^2 (pdf still 1 / (4 pi))", "z = 1 - 2 u: uniform on the sphere, pdf 1 / (4 pi)",
+       L1, "Quick radiometry recap", "tracer/lights.py: sample_uniform_direction"),
     _m("sphere-cone-disk-solid-angle",
        "The cone's solid angle approximated by the projected disk's, pi sin^2 theta_max.",
        "pdf = 1 / (pi sin^2 theta_max)", "pdf = 1 / (2 pi (1 - cos theta_max))",

@@ -70,8 +70,8 @@ def bsdf_tree(material, models: bool = False) -> dict:
         return BLACK
     model = tracer_only_model(material) if models else None
     tree = model if model is not None else convert(material, "mitsuba")
-    if material.opacity != 1:  # every kind: Mitsuba's mask around its BSDF
-        tree = {"type": "mask", "opacity": ("float", material.opacity), "material": tree}
+    if material.mask_opacity != 1:  # every kind: Mitsuba's mask around its BSDF
+        tree = {"type": "mask", "opacity": ("float", material.mask_opacity), "material": tree}
     return tree
 
 

@@ -54,10 +54,11 @@ dr = deferred("drjit")
 class MaterialModel:
     """A material of the scene model, the parsed ``[materials.NAME]`` table (a dataclass a kind)."""
     name: str
-    #: ``opacity`` of every kind (Mitsuba's ``mask``): the material counts with this weight,
-    #: and the ray continues straight through with weight 1 - opacity (read by the scene
-    #: parser for every kind, applied by :mod:`tracer.materials.dispatch`)
-    opacity: float = field(default=1.0, kw_only=True)
+    #: The TOML key ``opacity`` of every kind (Mitsuba's ``mask``): the material counts
+    #: with this weight, and the ray continues straight through with 1 - opacity (read
+    #: by the scene parser for every kind that does not read ``opacity`` itself, applied
+    #: by :mod:`tracer.materials.dispatch`)
+    mask_opacity: float = field(default=1.0, kw_only=True)
 
     #: Parts of this kind that only the tracer models, which a scene may declare in
     #: ``[compare] tracer_only`` (e.g. ``"schlick"``).

@@ -144,7 +144,7 @@ class SceneMaterials:
         # (the side the shading normal points away from), as a bare Mitsuba BSDF is.
         one_sided = [getattr(m, "two_sided", True) is False for m in materials]
         self.has_one_sided = any(one_sided)
-        opacity = [m.opacity for m in materials]
+        opacity = [m.mask_opacity for m in materials]
         #: some material is not opaque (``opacity`` < 1, Mitsuba's ``mask``)
         self.has_mask = any(o != 1 for o in opacity)
         self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
