@@ -114,7 +114,7 @@ def _light_sample_map(light) -> Callable | None:
     from reference.emitters import REGISTRY
     from tracer.emitters import type_of
 
-    return getattr(REGISTRY[type_of(light)], "sample_map", None)
+    return getattr(REGISTRY.get(type_of(light)), "sample_map", None)
 
 
 @dataclass

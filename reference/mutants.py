@@ -315,6 +315,11 @@ CATALOG: tuple[Mutant, ...] = (
        "The checkerboard is looked up at (v, u).",
        "(u', v') = (s_u v, s_v u)", "(u', v') = (s_u u, s_v v)",
        L2, "The BRDF", "tracer/texture.py: checkerboard"),
+    _m("bitmap-v-flipped",
+       "A bitmap texture's v is measured from the image's bottom row, as in OpenGL, not from "
+       "its top row as Mitsuba does.",
+       "row = (1 - v) height", "row = v height",
+       L2, "The BRDF", "tracer/texture.py: bitmap"),
     _m("classic-reflection-tinted",
        "In Whitted's model the reflected ray is tinted by the surface colour.",
        "I = ... + ks colour S", "I = ... + ks S",
