@@ -208,3 +208,15 @@ def sample_uniform_direction(sample):
     r = dr.sqrt(dr.maximum(1 - z * z, 0))
     s, c = dr.sincos(2 * math.pi * sample.x)
     return c * r, s * r, z
+
+
+def spot_uv(x, y, z_tan):
+    """Texture coordinates of a textured spot for the direction (x, y, z) in its frame,
+    ``z_tan`` = z tan(cutoff): (1/2 + x / (2 z tan), 1/2 + y / (2 z tan)), the cutoff cone's
+    square cross-section mapped onto the unit square (Mitsuba 3's ``spot``)."""
+    from tracer.backend import jit
+
+    u, v = 0.5 * x / z_tan, 0.5 * y / z_tan
+    if faults.on("spot-uv-centred-at-zero"):
+        return jit.Array2f(u, v)
+    return jit.Array2f(0.5 + u, 0.5 + v)
