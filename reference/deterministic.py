@@ -122,6 +122,8 @@ class _Light:
     emitter: object
     index: int | None          # the tracer's area-light number; None for delta emitters
     sample_map: Callable | None
+    #: samples the emitter at the tracer's sample another way than its sample_direction
+    sampler: Callable | None = None
 
 
 def _lights(scene: Scene, ms, mi) -> list[_Light]:
@@ -148,7 +150,10 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
             k = int(e.id().removeprefix("light_"))
             sample_map = _light_sample_map(scene.lights[k])
             if sample_map is not None:  # a light at infinity sampled as the tracer does
-                out.append(_Light(e, sampled.index(k), sample_map))
+                from reference.emitters import REGISTRY
+
+                sampler = getattr(REGISTRY.get(type_of(scene.lights[k])), "direct_sample", None)
+                out.append(_Light(e, sampled.index(k), sample_map, sampler))
                 continue
         if shape is None or mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             out.append(_Light(e, None, None))
@@ -204,7 +209,7 @@ class DeterministicReference:
                     t = light_sample(jit.UInt32(pixel), jit.UInt32(s), scene.film.strata,
                                      self.seed, depth, light.index)
                     u = light.sample_map(mi.Point2f(t), mi)
-                contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth)
+                contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth, light.sampler)
             if terms.spawns_children(depth):
                 for flag in terms.lobes:
                     wo, weight, keep = terms.lobe(bsdf, si, flag, delta)

@@ -324,6 +324,11 @@ CATALOG: tuple[Mutant, ...] = (
        "its top row as Mitsuba does.",
        "row = (1 - v) height", "row = v height",
        L2, "The BRDF", "tracer/texture.py: bitmap"),
+    _m("latlong-z-not-negated",
+       "An environment map's longitude is measured from +z, not from -z as Mitsuba's "
+       "lat-long maps are: the map turned half a revolution.",
+       "u = atan2(d.x, d.z) / (2 pi)", "u = atan2(d.x, -d.z) / (2 pi)",
+       L2, "Point and directional lights", "tracer/texture.py: latlong"),
     _m("classic-reflection-tinted",
        "In Whitted's model the reflected ray is tinted by the surface colour.",
        "I = ... + ks colour S", "I = ... + ks S",

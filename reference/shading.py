@@ -144,12 +144,23 @@ class Terms:
             keep = dr.select(with_null, picked, keep)
         return si.to_world(wo), weight, keep & (dr.max(weight) > 0)
 
-    def direct(self, si, bsdf, emitter, u, beta, active):
-        """beta f cos x (the emitter's weight) for one light sample ``u``, where not shadowed."""
-        ds, weight = emitter.sample_direction(si, u, active)
-        lit = active & (ds.pdf != 0) & (dr.max(weight) > 0)
-        lit &= ~self.scene.ray_test(si.spawn_ray_to(ds.p), lit)
-        f = bsdf.eval(self.ctx, si, si.to_local(ds.d), lit)
+    def direct(self, si, bsdf, emitter, u, beta, active, sampler=None):
+        """beta f cos x (the emitter's weight) for one light sample ``u``, where not shadowed.
+
+        ``sampler(emitter, si, u, mi) -> (direction, weight)``: a light at infinity
+        sampled another way than by the emitter's own ``sample_direction`` (an
+        environment map at the tracer's directions, ``reference/emitters/envmap.py``).
+        """
+        if sampler is None:
+            ds, weight = emitter.sample_direction(si, u, active)
+            lit = active & (ds.pdf != 0) & (dr.max(weight) > 0)
+            lit &= ~self.scene.ray_test(si.spawn_ray_to(ds.p), lit)
+            d = ds.d
+        else:
+            d, weight = sampler(emitter, si, u, self.mi)
+            lit = active & (dr.max(weight) > 0)
+            lit &= ~self.scene.ray_test(si.spawn_ray(d), lit)
+        f = bsdf.eval(self.ctx, si, si.to_local(d), lit)
         return dr.select(lit, beta * f * weight, 0)
 
     def spawns_children(self, segment: int) -> bool:

@@ -1,5 +1,7 @@
 """Textures: Mitsuba's checkerboard and bitmap, looked up at a hit's texture coordinates."""
 
+import math
+
 import drjit as dr
 
 from tracer import faults
@@ -69,3 +71,37 @@ def bitmap(uv, texels, offset, width, height, bilinear, mode, active):
     top = dr.fma(fx, t10 - t00, t00)
     bottom = dr.fma(fx, t11 - t01, t01)
     return dr.fma(fy, bottom - top, top)
+
+
+def latlong(d, texels, width: int, height: int):
+    """A lat-long environment map's radiance in the unit direction ``d`` (its own frame).
+
+    u = atan2(d.x, -d.z) / (2 pi), v = acos(d.y) / pi (+y the top row, -z the
+    map's centre column), Mitsuba 3's ``envmap`` convention. Texel centres sit at
+    u = (i + 1/2) / W (so u is shifted by half a texel and wrapped) and at
+    v = j / (H - 1) (the first and last rows on the poles); bilinear between them.
+    ``texels`` holds H rows of W + 1 texels, the last column repeating the first
+    (periodic in u).
+    """
+    u = dr.atan2(d.x, -d.z) * (0.5 / math.pi)
+    v = dr.safe_acos(d.y) * (1 / math.pi)
+    if faults.on("latlong-z-not-negated"):
+        u = dr.atan2(d.x, d.z) * (0.5 / math.pi)
+    u = u - 0.5 / width
+    u = u - dr.floor(u)
+    x = u * width
+    y = v * (height - 1)
+    px = dr.minimum(dr.floor(x), width - 1)
+    py = dr.minimum(dr.floor(y), height - 2)
+    wx, wy = x - px, y - py
+    row = width + 1
+    i = dr.fma(py, row, px)
+    UInt = dr.uint32_array_t(type(d.x))
+    i = UInt(i)
+    v00 = dr.gather(type(texels), texels, i)
+    v10 = dr.gather(type(texels), texels, i + 1)
+    v01 = dr.gather(type(texels), texels, i + row)
+    v11 = dr.gather(type(texels), texels, i + row + 1)
+    top = dr.fma(wx, v10 - v00, v00)
+    bottom = dr.fma(wx, v11 - v01, v01)
+    return dr.fma(wy, bottom - top, top)
