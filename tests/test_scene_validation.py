@@ -170,8 +170,8 @@ def test_missing_mesh_file_is_refused_with_one_line(tmp_path):
     ("[[shapes]]\ntype='instance'\ngroup='nope'\n", "shapes[0].group", 'unknown group "nope"'),
     ("[groups.g]\n[[groups.g.shapes]]\ntype='instance'\ngroup='g'\n", "groups.g.shapes[0].type",
      "nested instancing"),
-    ("[[shapes]]\ntype='cylinder'\nmaterial='m'\nemitter={radiance=1}\n", "shapes[0].emitter",
-     "not on a cylinder"),
+    ("[[shapes]]\ntype='paraboloid'\nmaterial='m'\nemitter={radiance=1}\n", "shapes[0].emitter",
+     "not on a paraboloid"),
     ("[[shapes]]\ntype='polygon'\nmaterial='m'\nvertices=[[0,0,0],[1,0,0],[1,1,0],[0,1,0.5]]\n",
      "shapes[0].vertices", "planar"),
     # A pentagram drawn point to point: its edges cross.
