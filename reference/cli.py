@@ -366,9 +366,16 @@ def format_fresnel(table) -> str:
             f"{s['worst_plugin_deviation_in_half_intervals']:6.2f} "
             f"{s['max_abs_schlick_minus_exact']:16.4f} {s['schlick_worst_theta_deg']:5.1f}d  "
             f"{'pass' if ok else 'FAIL'}")
+    lines.append(f"{'conductor':>9} {'ch':<4} {'|ours-mi.fresnel_conductor|':>28} {'/tol':>6}"
+                 f" {'|ours-float64|':>15}  check")
+    for c in table.conductors:
+        lines.append(f"{c['conductor']:>9} {c['channel']:<4} "
+                     f"{c['max_abs_ours_minus_mitsuba']:28.2e} {c['worst_over_tolerance']:6.2f} "
+                     f"{c['max_abs_ours_minus_float64']:15.2e}  "
+                     f"{'pass' if c['pass'] else 'FAIL'}")
     lines.append(("PASS" if table.passed else "FAIL") +
-                 " (exact vs mi.fresnel within float32 rounding; exact inside the plugin's "
-                 "binomial interval)")
+                 " (exact vs mi.fresnel and conductors vs mi.fresnel_conductor within float32 "
+                 "rounding; exact inside the plugin's binomial interval)")
     return "\n".join(lines)
 
 

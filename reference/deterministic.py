@@ -101,9 +101,20 @@ def shares_light_samples(scene: Scene) -> bool:
     """
     from tracer.emitters import LIGHTS, type_of
 
-    if any(not LIGHTS[type_of(light)].Emitter.delta for light in scene.lights):
+    if any(_light_sample_map(light) is None for light in scene.lights
+           if not LIGHTS[type_of(light)].Emitter.delta and
+           LIGHTS[type_of(light)].Emitter.illuminates):
         return False
     return all(type(s) in SAMPLE_MAPS for s in scene.shapes if s.emitter is not None)
+
+
+def _light_sample_map(light) -> Callable | None:
+    """The sample map of a ``[[lights]]`` kind Mitsuba samples as the tracer does (the
+    ``sample_map`` of its conversion module, ``reference/emitters/``), or None."""
+    from reference.emitters import REGISTRY
+    from tracer.emitters import type_of
+
+    return getattr(REGISTRY.get(type_of(light)), "sample_map", None)
 
 
 @dataclass
@@ -111,6 +122,8 @@ class _Light:
     emitter: object
     index: int | None          # the tracer's area-light number; None for delta emitters
     sample_map: Callable | None
+    #: samples the emitter at the tracer's sample another way than its sample_direction
+    sampler: Callable | None = None
 
 
 def _lights(scene: Scene, ms, mi) -> list[_Light]:
@@ -123,10 +136,25 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
     tracer's points of the same light. Others (an environment that lights
     nothing) are handed any sample.
     """
+    from tracer.emitters import LIGHTS, type_of
+
     emitting = [i for i, s in enumerate(scene.shapes) if s.emitter is not None]
+    # The tracer numbers its sampled lights: sampled [[lights]] first, then area emitters.
+    sampled = [i for i, light in enumerate(scene.lights)
+               if not LIGHTS[type_of(light)].Emitter.delta]
     out = []
     for e in ms.emitters():
         shape = e.get_shape()
+        if shape is None and e.id().startswith("light_") and not mi.has_flag(
+                e.flags(), mi.EmitterFlags.Delta):
+            k = int(e.id().removeprefix("light_"))
+            sample_map = _light_sample_map(scene.lights[k])
+            if sample_map is not None:  # a light at infinity sampled as the tracer does
+                from reference.emitters import REGISTRY
+
+                sampler = getattr(REGISTRY.get(type_of(scene.lights[k])), "direct_sample", None)
+                out.append(_Light(e, sampled.index(k), sample_map, sampler))
+                continue
         if shape is None or mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             out.append(_Light(e, None, None))
             continue
@@ -134,7 +162,7 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
         kind = type(scene.shapes[k])
         if kind not in SAMPLE_MAPS:
             raise NotImplementedError(f"no shared light samples for {kind.__name__} emitters")
-        out.append(_Light(e, emitting.index(k), SAMPLE_MAPS[kind]))
+        out.append(_Light(e, len(sampled) + emitting.index(k), SAMPLE_MAPS[kind]))
     return out
 
 
@@ -181,15 +209,13 @@ class DeterministicReference:
                     t = light_sample(jit.UInt32(pixel), jit.UInt32(s), scene.film.strata,
                                      self.seed, depth, light.index)
                     u = light.sample_map(mi.Point2f(t), mi)
-                contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth)
+                contrib += terms.direct(si, bsdf, light.emitter, u, beta, smooth, light.sampler)
             if terms.spawns_children(depth):
-                flags = bsdf.flags()
-                for flag, lobe_ctx in terms.lobes:
-                    follow = delta & mi.has_flag(flags, flag)
-                    bs, weight = bsdf.sample(lobe_ctx, si, 0.5, mi.Point2f(0.5, 0.5), follow)
+                for flag in terms.lobes:
+                    wo, weight, keep = terms.lobe(bsdf, si, flag, delta)
                     w = beta * weight
-                    keep = follow & (bs.pdf > 0) & (dr.max(w) > 0)
-                    children.append((si.spawn_ray(si.to_world(bs.wo)), w, keep))
+                    keep &= dr.max(w) > 0
+                    children.append((si.spawn_ray(wo), w, keep))
         dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, slot)
         if not children:
             dr.eval(L)

@@ -31,12 +31,14 @@ from __future__ import annotations
 import csv
 import json
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 DEFAULT_IORS = (1.0, 1.33, 1.5, 2.42)
+#: Named conductors whose curves are checked (``tracer.ior.CONDUCTORS``).
+DEFAULT_CONDUCTORS = ("Au", "Cu", "Al", "none")
 ULP = 2.0 ** -24
 ALPHA = 0.01
 
@@ -68,6 +70,59 @@ def float32_tolerance(cos_i: np.ndarray, eta: float, ulps: int = 16) -> np.ndarr
     return np.maximum(up, down) + ulps * ULP * np.maximum(r, ULP)
 
 
+def conductor64(cos_i: np.ndarray, eta: float, k: float) -> np.ndarray:
+    """A conductor's Fresnel reflectance in float64 from pbrt-v4's complex form (``FrComplex``,
+    section 9.3): the dielectric equations with n_t = eta + i k, for the rounding yardstick."""
+    c = np.minimum(np.abs(cos_i), 1).astype(np.complex128)
+    n = complex(eta, k)
+    cos_t = np.sqrt(1 - (1 - c * c) / (n * n))
+    r_par = (n * c - cos_t) / (n * c + cos_t)
+    r_perp = (c - n * cos_t) / (c + n * cos_t)
+    return 0.5 * (np.abs(r_par) ** 2 + np.abs(r_perp) ** 2)
+
+
+def conductor_tolerance(cos_i: np.ndarray, eta: float, k: float, ulps: int = 16) -> np.ndarray:
+    """How far two float32 evaluations of a conductor's R may differ (as for glass above)."""
+    d = ulps * ULP * np.maximum(np.abs(cos_i), ULP)
+    r = conductor64(cos_i, eta, k)
+    up = np.abs(conductor64(np.clip(cos_i + d, 0, 1), eta, k) - r)
+    down = np.abs(conductor64(np.clip(cos_i - d, 0, 1), eta, k) - r)
+    return np.maximum(up, down) + ulps * ULP * np.maximum(r, ULP)
+
+
+def conductor_curves(mi, names=DEFAULT_CONDUCTORS, step: float = 0.5) -> list[dict]:
+    """Per named conductor and RGB channel: :func:`tracer.fresnel.fresnel_conductor` against
+    ``mi.fresnel_conductor`` in float32, within :func:`conductor_tolerance`, and both against
+    the float64 complex form."""
+
+    from tracer import fresnel
+    from tracer.backend import jit
+    from tracer.ior import CONDUCTORS
+
+    theta = np.arange(0, 90 + 1e-9, step)
+    cos32 = np.cos(np.radians(theta)).astype(np.float32)
+    cos64 = cos32.astype(np.float64)
+    out = []
+    for name in names:
+        eta, k = CONDUCTORS[name]
+        for ch, channel in enumerate("rgb"):
+            ours = np.asarray(fresnel.fresnel_conductor(
+                jit.Float(cos32), jit.Float(np.float32(eta[ch])), jit.Float(np.float32(k[ch]))),
+                dtype=np.float64)
+            theirs = np.asarray(mi.fresnel_conductor(
+                mi.Float(cos32), mi.Complex2f(float(eta[ch]), float(k[ch]))), dtype=np.float64)
+            tol = conductor_tolerance(cos64, eta[ch], k[ch])
+            exact = conductor64(cos64, eta[ch], k[ch])
+            d = np.abs(ours - theirs)
+            ok = bool(np.all(d <= tol))
+            out.append({"conductor": name, "channel": channel, "eta": eta[ch], "k": k[ch],
+                        "max_abs_ours_minus_mitsuba": float(d.max()),
+                        "worst_over_tolerance": float(np.max(d / tol)),
+                        "max_abs_ours_minus_float64": float(np.abs(ours - exact).max()),
+                        "pass": ok})
+    return out
+
+
 def wilson_interval(k: np.ndarray, n: int, z: float) -> tuple[np.ndarray, np.ndarray]:
     """Wilson score interval for a binomial proportion k / n."""
     p = k / n
@@ -95,6 +150,8 @@ class FresnelTable:
     summary: list[dict]
     passed: bool
     samples: int
+    #: conductor curves: per named conductor and channel, ours against mi.fresnel_conductor
+    conductors: list[dict] = field(default_factory=list)
 
 
 def _ours(cos_i: np.ndarray, eta: float):
@@ -185,7 +242,9 @@ def fresnel_table(iors=DEFAULT_IORS, step: float = 0.5, samples: int = 100_000,
                              "exact": float(exact[i]), "schlick": float(schlick[i]),
                              "mitsuba": float(r_mi[i]),
                              "plugin": None if np.isnan(plugin[i]) else float(plugin[i])})
-    return FresnelTable(rows, summary, passed, samples)
+    conductors = conductor_curves(mi, step=step)
+    passed &= all(c["pass"] for c in conductors)
+    return FresnelTable(rows, summary, passed, samples, conductors)
 
 
 def write_outputs(table: FresnelTable, outdir: str | Path) -> list[Path]:
@@ -202,7 +261,8 @@ def write_outputs(table: FresnelTable, outdir: str | Path) -> list[Path]:
                         "" if r["plugin"] is None else f"{r['plugin']:.9g}"])
     json_path = out / "fresnel.json"
     json_path.write_text(json.dumps({"pass": table.passed, "samples_per_angle": table.samples,
-                                     "curves": table.summary}, indent=2) + "\n")
+                                     "curves": table.summary,
+                                     "conductors": table.conductors}, indent=2) + "\n")
     png_path = out / "fresnel.png"
     plot(table, png_path)
     return [csv_path, json_path, png_path]

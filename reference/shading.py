@@ -69,15 +69,24 @@ class Terms:
         self.last_segment_sees = any(seen_by_rays(e, mi) and not is_hit_term(e)
                                      for e in self.emitters)
         self.ctx = mi.BSDFContext()
-        #: the delta lobes only: BSDF.sample picks one of them, never a smooth lobe
+        #: the delta lobes only, and the null lobe (a ray passing straight through:
+        #: ``thindielectric``'s transmission, ``mask``'s 1 - opacity): BSDF.sample picks
+        #: one of them, never a smooth lobe
         self.delta = mi.BSDFContext()
-        self.delta.type_mask = +mi.BSDFFlags.Delta
-        #: (flag, context) for each delta lobe alone
-        self.lobes = []
-        for flag in (mi.BSDFFlags.DeltaReflection, mi.BSDFFlags.DeltaTransmission):
-            ctx = mi.BSDFContext()
-            ctx.type_mask = flag
-            self.lobes.append((flag, ctx))
+        self.delta.type_mask = mi.BSDFFlags.Delta | mi.BSDFFlags.Null
+        #: the lobes followed one by one: both delta lobes and the null lobe
+        self.lobes = (mi.BSDFFlags.DeltaReflection, mi.BSDFFlags.DeltaTransmission,
+                      mi.BSDFFlags.Null)
+        #: some BSDF of the scene has a null lobe
+        self.has_null = any(mi.has_flag(shape.bsdf().flags(), mi.BSDFFlags.Null)
+                            for shape in scene.shapes() if shape.bsdf() is not None)
+        self._alone = {}
+        self._with_null = {}
+        for flag in self.lobes:
+            self._alone[flag] = mi.BSDFContext()
+            self._alone[flag].type_mask = flag
+            self._with_null[flag] = mi.BSDFContext()
+            self._with_null[flag].type_mask = flag | mi.BSDFFlags.Null
 
     def shaded(self, segment):
         """Whether the hit of a ray of path segment ``segment`` (1 = camera ray) is shaded."""
@@ -100,14 +109,58 @@ class Terms:
         """(smooth, delta): lanes whose BSDF gathers direct light, and those with delta lobes."""
         mi = self.mi
         return (active & mi.has_flag(flags, mi.BSDFFlags.Smooth),
-                active & mi.has_flag(flags, mi.BSDFFlags.Delta))
+                active & (mi.has_flag(flags, mi.BSDFFlags.Delta) |
+                          mi.has_flag(flags, mi.BSDFFlags.Null)))
 
-    def direct(self, si, bsdf, emitter, u, beta, active):
-        """beta f cos x (the emitter's weight) for one light sample ``u``, where not shadowed."""
-        ds, weight = emitter.sample_direction(si, u, active)
-        lit = active & (ds.pdf != 0) & (dr.max(weight) > 0)
-        lit &= ~self.scene.ray_test(si.spawn_ray_to(ds.p), lit)
-        f = bsdf.eval(self.ctx, si, si.to_local(ds.d), lit)
+    def lobe(self, bsdf, si, flag, active):
+        """(direction in world space, weight, lanes that follow it) of one lobe alone.
+
+        A BSDF without a null lobe is sampled in a context that enables ``flag``
+        only; it then returns that lobe with its own weight (R or
+        (1 - R)(n1/n2)^2 from ``dielectric``). A BSDF with a null lobe
+        (``thindielectric``, ``mask``) weighs its lobes by the probabilities with
+        which it picks them, so it is sampled in a context that enables ``flag``
+        and the null lobe, at the end of the sample range where ``flag`` is picked
+        (0 for a delta lobe, just below 1 for the null lobe), and the lobe's weight
+        is the sample's weight times its probability (value / pdf x pdf). (Mitsuba
+        3.9.1's ``mask`` needs the null lobe enabled: asked for its nested lobes
+        alone, it inverts its choice and returns the null lobe.)
+        """
+        mi = self.mi
+        flags = bsdf.flags()
+        follow = active & mi.has_flag(flags, flag)
+        null = mi.has_flag(flags, mi.BSDFFlags.Null)
+        half = mi.Point2f(0.5, 0.5)
+        plain = follow & ~null
+        bs, weight = bsdf.sample(self._alone[flag], si, 0.5, half, plain)
+        wo, keep = bs.wo, plain & (bs.pdf > 0)
+        with_null = follow & null
+        if self.has_null:
+            u1 = 1 - 2.0 ** -24 if flag == mi.BSDFFlags.Null else 0.0
+            bn, wn = bsdf.sample(self._with_null[flag], si, u1, half, with_null)
+            picked = with_null & (bn.pdf > 0) & mi.has_flag(bn.sampled_type, flag)
+            wo = dr.select(with_null, bn.wo, wo)
+            weight = dr.select(with_null, wn * bn.pdf, weight)
+            keep = dr.select(with_null, picked, keep)
+        return si.to_world(wo), weight, keep & (dr.max(weight) > 0)
+
+    def direct(self, si, bsdf, emitter, u, beta, active, sampler=None):
+        """beta f cos x (the emitter's weight) for one light sample ``u``, where not shadowed.
+
+        ``sampler(emitter, si, u, mi) -> (direction, weight)``: a light at infinity
+        sampled another way than by the emitter's own ``sample_direction`` (an
+        environment map at the tracer's directions, ``reference/emitters/envmap.py``).
+        """
+        if sampler is None:
+            ds, weight = emitter.sample_direction(si, u, active)
+            lit = active & (ds.pdf != 0) & (dr.max(weight) > 0)
+            lit &= ~self.scene.ray_test(si.spawn_ray_to(ds.p), lit)
+            d = ds.d
+        else:
+            d, weight = sampler(emitter, si, u, self.mi)
+            lit = active & (dr.max(weight) > 0)
+            lit &= ~self.scene.ray_test(si.spawn_ray(d), lit)
+        f = bsdf.eval(self.ctx, si, si.to_local(d), lit)
         return dr.select(lit, beta * f * weight, 0)
 
     def spawns_children(self, segment: int) -> bool:

@@ -170,8 +170,8 @@ def test_missing_mesh_file_is_refused_with_one_line(tmp_path):
     ("[[shapes]]\ntype='instance'\ngroup='nope'\n", "shapes[0].group", 'unknown group "nope"'),
     ("[groups.g]\n[[groups.g.shapes]]\ntype='instance'\ngroup='g'\n", "groups.g.shapes[0].type",
      "nested instancing"),
-    ("[[shapes]]\ntype='cylinder'\nmaterial='m'\nemitter={radiance=1}\n", "shapes[0].emitter",
-     "not on a cylinder"),
+    ("[[shapes]]\ntype='paraboloid'\nmaterial='m'\nemitter={radiance=1}\n", "shapes[0].emitter",
+     "not on a paraboloid"),
     ("[[shapes]]\ntype='polygon'\nmaterial='m'\nvertices=[[0,0,0],[1,0,0],[1,1,0],[0,1,0.5]]\n",
      "shapes[0].vertices", "planar"),
     # A pentagram drawn point to point: its edges cross.
@@ -202,11 +202,11 @@ def test_bad_new_shapes_name_their_key(shapes, key, words):
      "materials.p.reflectance.checkerboard.scale", "positive"),
     # An unknown texture kind is named as such, at its own key (not "checkerboard: missing").
     ("type='diffuse'\nreflectance={marble={}}\n", "materials.p.reflectance.marble",
-     "unknown texture (expected one of: checkerboard)"),
+     "unknown texture (expected one of: checkerboard, bitmap)"),
     ("type='diffuse'\nreflectance={bitmap={filename='t.png'}}\n",
-     "materials.p.reflectance.bitmap", "unknown texture (expected one of: checkerboard)"),
+     "materials.p.reflectance.bitmap.filename", "no such image file"),
     ("type='diffuse'\nreflectance={}\n", "materials.p.reflectance",
-     "expected exactly one of checkerboard in a texture, got none"),
+     "expected exactly one of checkerboard, bitmap in a texture, got none"),
 ])
 def test_bad_new_materials_name_their_key(material, key, words):
     text = "[camera]\norigin=[0,0,5]\ntarget=[0,0,0]\n[materials.p]\n" + material

@@ -154,8 +154,11 @@ MATERIAL = "[materials.m]\ntype = 'diffuse'\n"
     (MATERIAL + "reflectanse = 0.5\n", "materials.m.reflectanse"),
     (MATERIAL + "reflectance = 'red'\n", "materials.m.reflectance"),
     (MATERIAL + "reflectance = 2\n", "materials.m.reflectance"),
-    (MATERIAL + "reflectance = { bitmap = { filename = 't.png' } }\n",
-     "materials.m.reflectance.bitmap"),
+    (MATERIAL + "reflectance = { marble = { scale = 2 } }\n",
+     "materials.m.reflectance.marble"),
+    (MATERIAL + f"reflectance = {{ bitmap = {{ filename = '{ROOT}/scenes/textures/tiles.png', "
+                "filter = 'nearest' } }\n",
+     "materials.m.reflectance.bitmap.filter"),
     (MATERIAL + "reflectance = { checkerboard = { color0 = 0.5, colour1 = 0.1 } }\n",
      "materials.m.reflectance.checkerboard.colour1"),
     ("[materials.m]\ntype = 'phong'\nmodel = 'cook-torrance'\n", "materials.m.model"),
@@ -251,14 +254,15 @@ def test_a_new_kind_and_a_new_key_appear_in_the_schema(monkeypatch):
     mats = after["properties"]["materials"]["additionalProperties"]
     assert kinds(mats)[-1] == "toy"
     toy = variant(mats, "toy")
-    assert set(toy["properties"]) == {"type", "glow", "halo", "mood", "fury"}
+    # opacity: read for every kind (Mitsuba's mask), after the kind's own parser
+    assert set(toy["properties"]) == {"type", "glow", "halo", "mood", "fury", "opacity"}
     assert toy["properties"]["glow"]["minimum"] == 0 and toy["properties"]["glow"]["default"] == 2
     assert toy["properties"]["mood"]["enum"] == ["calm", "wild"]
     assert "halo" not in toy.get("required", [])  # read only when present
     dif = variant(mats, "diffuse")
     assert dif["properties"]["sheen"]["type"] == "integer"
     tex = next(f for f in dif["properties"]["reflectance"]["anyOf"] if f.get("type") == "object")
-    assert set(tex["properties"]) == {"checkerboard", "marble"}
+    assert set(tex["properties"]) == {"checkerboard", "bitmap", "marble"}
     lights = after["properties"]["lights"]["items"]
     lamp = variant(lights, "lamp")
     assert lamp["properties"]["on"]["type"] == "boolean" and lamp["required"] == ["type",

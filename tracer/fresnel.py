@@ -12,6 +12,8 @@ Computer Graphics Forum 13(3), 1994; Pharr, Jakob, Humphreys, "Physically Based
 Rendering", 4th ed., section 9.5 (dielectric BSDF).
 """
 
+import math
+
 import drjit as dr
 
 from tracer import faults
@@ -123,3 +125,100 @@ def refract(d, n, eta):
     inv = dr.rcp(rel)
     t = inv * d + (inv * c - cos_t) * n_facing
     return t, tir
+
+
+def fresnel_conductor(cos_i, eta, k):
+    """Fresnel reflectance of unpolarised light at a smooth conductor, per channel.
+
+    The conductor's complex index eta + i k relative to the outside (pbrt-v4,
+    section 9.3, ``FrComplex``: the dielectric equations with a complex n_t and
+    cos_t = sqrt(1 - sin^2(theta_i) / (eta + i k)^2)). Written in real
+    arithmetic (Born and Wolf, "Principles of Optics", 7th ed., section 14.2;
+    Mitsuba 3's ``fresnel_conductor``): with s2 = sin^2(theta_i), c = |cos_i|,
+
+        a^2 + b^2 = sqrt((eta^2 - k^2 - s2)^2 + 4 eta^2 k^2),
+        a = sqrt((a^2 + b^2 + eta^2 - k^2 - s2) / 2),
+        R_s = (a^2 + b^2 + c^2 - 2 a c) / (a^2 + b^2 + c^2 + 2 a c),
+        R_p = R_s (c^2 (a^2 + b^2) + s2^2 - 2 a c s2) / (c^2 (a^2 + b^2) + s2^2 + 2 a c s2),
+        R = (R_s + R_p) / 2.
+
+    k = 0 gives the dielectric's R (below its critical angle); eta = 0, k = 1
+    gives R = 1 at every angle (Mitsuba's ``material = "none"``).
+    """
+    if faults.on("conductor-k-ignored"):
+        k = k * 0
+    c = dr.minimum(dr.abs(cos_i), 1)
+    c2 = c * c
+    s2 = 1 - c2
+    s4 = s2 * s2
+    t1 = eta * eta - k * k - s2
+    a2b2 = dr.safe_sqrt(t1 * t1 + 4 * eta * eta * k * k)
+    a = dr.safe_sqrt(0.5 * (a2b2 + t1))
+    t2 = 2 * c * a
+    r_s = (a2b2 + c2 - t2) / (a2b2 + c2 + t2)
+    t3 = a2b2 * c2 + s4
+    t4 = t2 * s2
+    r_p = r_s * (t3 - t4) / (t3 + t4)
+    return 0.5 * (r_s + r_p)
+
+
+def thin_slab_reflectance(r):
+    """Reflectance of a thin slab from its single-boundary R: R + T^2 R / (1 - R^2) = 2R / (1 + R).
+
+    A ray entering the slab (T = 1 - R) bounces between its two faces; every
+    odd number of inner reflections leaves it on the side it came from, so
+    R' = R + T^2 R (1 + R^2 + R^4 + ...) = R + T^2 R / (1 - R^2), which is
+    2R / (1 + R) (the geometric series of inner reflections; pbrt-v4,
+    section 9.5.4 ``ThinDielectricBxDF``; Mitsuba 3's ``thindielectric``). The
+    transmittance is 1 - R' = (1 - R) / (1 + R); the ray leaves the slab along its
+    own direction, the slab being thin.
+    """
+    if faults.on("thin-slab-single-reflection"):
+        return r
+    return 2 * r / (1 + r)
+
+
+def fresnel_diffuse_reflectance(eta):
+    """The hemispherical average of the Fresnel reflectance for diffuse light, F_dr(eta).
+
+    Light arriving from all directions of a hemisphere (cosine-weighted) at a
+    boundary with relative index eta (n_t / n_i) is reflected with
+    F_dr = 2 * integral of R(cos) cos dcos. Fitted rather than integrated, as
+    Mitsuba 3 does (``fresnel_diffuse_reflectance``), so that both agree to
+    float precision: for eta < 1 the fit of Egan and Hilgeman ("Optical
+    Properties of Inhomogeneous Materials", 1979; the form in Jensen et al.,
+    "A Practical Model for Subsurface Light Transport", SIGGRAPH 2001, eq. 9,
+    written there for 1 / eta)
+    -1.4399 eta^2 + 0.7099 eta + 0.6681 + 0.0636 / eta; for eta >= 1 the
+    polynomial in 1 / eta of d'Eon and Irving ("A Quantized-Diffusion Model
+    for Rendering Translucent Materials", SIGGRAPH 2011, section 5.1)
+    0.919317 - 3.4793 x + 6.75335 x^2 - 7.80989 x^3 + 4.98554 x^4 - 1.36881 x^5.
+    """
+    x = dr.rcp(eta)
+    low = dr.fma(0.0636, x, dr.fma(eta, dr.fma(eta, -1.4399, 0.7099), 0.6681))
+    high = dr.fma(x, dr.fma(x, dr.fma(x, dr.fma(x, dr.fma(x, -1.36881, 4.98554), -7.80989),
+                                         6.75335), -3.4793), 0.919317)
+    return dr.select(eta < 1, low, high)
+
+
+def plastic_diffuse(kd, f_i, f_o, eta, fdr_int, nonlinear):
+    """The diffuse part of a smooth plastic, without the cosine (Mitsuba 3's ``plastic``).
+
+    A Lambertian base under a smooth dielectric coating of relative index
+    eta (Weidlich and Wilkie, "Arbitrarily Layered Micro-Facet Surfaces",
+    GRAPHITE 2007, in the smooth limit): light enters through the coating
+    with (1 - F_i), is scattered by the base, and leaves with (1 - F_o), the
+    radiance scaled by 1 / eta^2 as it leaves the denser medium (Veach's
+    thesis, section 5.2). Light the coating reflects back inside (F_dr, the
+    internal diffuse Fresnel reflectance, :func:`fresnel_diffuse_reflectance`
+    of 1 / eta) is scattered again: the geometric series gives
+    kd / (1 - F_dr) when that light is taken as leaving with the base's own
+    spectrum (linear), kd / (1 - kd F_dr) when each bounce takes the base's
+    colour again (``nonlinear``, the saturating of wet or varnished
+    surfaces). f = kd' (1 - F_i)(1 - F_o) / (eta^2 pi).
+    """
+    if faults.on("plastic-no-internal-scattering"):
+        kd_eff = kd
+    else:
+        kd_eff = kd / (1 - dr.select(nonlinear, kd, 1.0) * fdr_int)
+    return kd_eff * ((1 - f_i) * (1 - f_o) / (eta * eta * math.pi))

@@ -645,12 +645,13 @@ class Geometry:
             members = of(kind)
             if members:
                 add(make(members), members)
-        for mesh in of(Mesh):  # one material for all its triangles; meshes do not emit
+        for mesh in of(Mesh):  # one material and one emitter for all its triangles
             block = _MeshBlock(mesh)
             block.base = sum(b.count for b in self.blocks)
             self.blocks.append(block)
             mids.append(np.full(block.count, mat_id(mesh), dtype=np.uint32))
-            rads.append(np.zeros((block.count, 3), dtype=np.float32))
+            radiance = mesh.emitter.radiance if mesh.emitter is not None else (0, 0, 0)
+            rads.append(np.tile(np.asarray(radiance, dtype=np.float32), (block.count, 1)))
         # Instances: one geometry per group (its own materials; groups do not emit), the
         # instances of a much-used group in one hierarchy, the others one by one.
         by_group: dict[str, list[Instance]] = {}

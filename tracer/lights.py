@@ -196,3 +196,27 @@ def coordinate_system(n):
     t = type(n)(1 + sign * n.x * n.x * a, sign * b, -sign * n.x)
     s = type(n)(b, sign + n.y * n.y * a, -n.y)
     return t, s
+
+
+def sample_uniform_direction(sample):
+    """A direction uniform on the unit sphere, pdf 1 / (4 pi) (Archimedes' hat-box theorem:
+    z uniform in [-1, 1] is uniform by area): z = 1 - 2 u.y, phi = 2 pi u.x, as Mitsuba 3's
+    ``square_to_uniform_sphere`` maps its sample (pbrt-v4, section A.5.2)."""
+    z = 1 - 2 * sample.y
+    if faults.on("sphere-direction-z-squared"):
+        z = 1 - 2 * sample.y * sample.y
+    r = dr.sqrt(dr.maximum(1 - z * z, 0))
+    s, c = dr.sincos(2 * math.pi * sample.x)
+    return c * r, s * r, z
+
+
+def spot_uv(x, y, z_tan):
+    """Texture coordinates of a textured spot for the direction (x, y, z) in its frame,
+    ``z_tan`` = z tan(cutoff): (1/2 + x / (2 z tan), 1/2 + y / (2 z tan)), the cutoff cone's
+    square cross-section mapped onto the unit square (Mitsuba 3's ``spot``)."""
+    from tracer.backend import jit
+
+    u, v = 0.5 * x / z_tan, 0.5 * y / z_tan
+    if faults.on("spot-uv-centred-at-zero"):
+        return jit.Array2f(u, v)
+    return jit.Array2f(0.5 + u, 0.5 + v)

@@ -841,8 +841,11 @@ _texture = parse_texture
 def _parse_material(t: _Table, name: str) -> Material:
     kind = t.string("type", choices=tuple(_materials.REGISTRY))
     m = _materials.REGISTRY[kind].parse(t, name)
+    opacity = 1.0
+    if "opacity" not in t.used:  # every kind's opacity, unless the kind has its own
+        opacity = t.number("opacity", 1.0, lo=0, hi=1)
     t.finish()
-    return m
+    return replace(m, mask_opacity=opacity) if opacity != 1 else m
 
 
 def _parse_emitter(t: _Table) -> AreaEmitter:

@@ -11,7 +11,16 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.emitters import area, background, directional, heckbert, point, spot
+from reference.emitters import (
+    area,
+    background,
+    constant,
+    directional,
+    envmap,
+    heckbert,
+    point,
+    spot,
+)
 from tracer.emitters import type_of
 from tracer.errors import UserError
 
@@ -21,6 +30,8 @@ REGISTRY: dict[str, ModuleType] = {
     "directional": directional,
     "spot": spot,
     "background": background,
+    "constant": constant,
+    "envmap": envmap,
     # made by materials of their shapes (tracer.emitters.SHAPE_LIGHTS), attached to the shape
     "heckbert": heckbert,
 }

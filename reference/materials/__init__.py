@@ -18,7 +18,16 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.materials import classic, dielectric, diffuse, mirror, phong
+from reference.materials import (
+    classic,
+    conductor,
+    dielectric,
+    diffuse,
+    mirror,
+    phong,
+    plastic,
+    thindielectric,
+)
 from reference.mitsuba_tree import rgb
 from tracer.errors import UserError
 from tracer.materials import type_of
@@ -27,7 +36,10 @@ from tracer.materials import type_of
 REGISTRY: dict[str, ModuleType] = {
     "diffuse": diffuse,
     "mirror": mirror,
+    "conductor": conductor,
     "dielectric": dielectric,
+    "thindielectric": thindielectric,
+    "plastic": plastic,
     "phong": phong,
     "classic": classic,
 }
@@ -57,7 +69,10 @@ def bsdf_tree(material, models: bool = False) -> dict:
     if material is None:
         return BLACK
     model = tracer_only_model(material) if models else None
-    return model if model is not None else convert(material, "mitsuba")
+    tree = model if model is not None else convert(material, "mitsuba")
+    if material.mask_opacity != 1:  # every kind: Mitsuba's mask around its BSDF
+        tree = {"type": "mask", "opacity": ("float", material.mask_opacity), "material": tree}
+    return tree
 
 
 def tracer_only_model(material) -> dict | None:

@@ -1,7 +1,8 @@
 """Mitsuba conversion of ``diffuse`` (tracer/materials/diffuse.py): a two-sided ``diffuse``.
 
 Mitsuba's ``diffuse`` is one-sided (black from behind); the tracer's diffuse
-surfaces are two-sided, as Mitsuba's ``twosided`` wrapper makes them.
+surfaces are two-sided, as Mitsuba's ``twosided`` wrapper makes them, unless
+``two_sided = false``.
 """
 
 from __future__ import annotations
@@ -11,5 +12,5 @@ from tracer.materials.diffuse import Diffuse
 
 
 def mitsuba(m: Diffuse) -> dict:
-    return {"type": "twosided",
-            "material": {"type": "diffuse", "reflectance": texture_tree(m.reflectance)}}
+    bsdf = {"type": "diffuse", "reflectance": texture_tree(m.reflectance)}
+    return {"type": "twosided", "material": bsdf} if m.two_sided else bsdf

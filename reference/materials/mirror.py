@@ -12,6 +12,6 @@ from tracer.materials.mirror import Mirror
 
 
 def mitsuba(m: Mirror) -> dict:
-    return {"type": "twosided",
-            "material": {"type": "conductor", "material": ("string", "none"),
-                         "specular_reflectance": rgb(m.reflectance)}}
+    bsdf = {"type": "conductor", "material": ("string", "none"),
+            "specular_reflectance": rgb(m.reflectance)}
+    return {"type": "twosided", "material": bsdf} if m.two_sided else bsdf

@@ -3,11 +3,15 @@
 from __future__ import annotations
 
 from reference.mitsuba_tree import rgb
-from tracer.materials.textures import Checkerboard, Texture
+from tracer.materials.textures import Bitmap, Checkerboard, Texture
 
 
 def texture_tree(tex: Texture) -> dict:
-    """Mitsuba's ``checkerboard`` (``to_uv`` a scale) or an ``rgb`` colour."""
+    """Mitsuba's ``bitmap``, ``checkerboard`` (``to_uv`` a scale) or an ``rgb`` colour."""
+    if isinstance(tex, Bitmap):
+        return {"type": "bitmap", "filename": ("string", tex.filename),
+                "filter_type": ("string", tex.filter_type), "raw": ("boolean", tex.raw),
+                "wrap_mode": ("string", tex.wrap_mode)}
     if isinstance(tex, Checkerboard):
         return {"type": "checkerboard", "color0": rgb(tex.color0), "color1": rgb(tex.color1),
                 "to_uv": ("uvscale", tex.scale)}

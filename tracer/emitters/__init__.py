@@ -17,7 +17,16 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.emitters import area, background, directional, heckbert, point, spot
+from tracer.emitters import (
+    area,
+    background,
+    constant,
+    directional,
+    envmap,
+    heckbert,
+    point,
+    spot,
+)
 from tracer.emitters.base import Emitter, LightModel
 
 #: ``[[lights]]`` TOML ``type`` -> the module of that kind (one line per kind).
@@ -26,6 +35,8 @@ LIGHTS: dict[str, ModuleType] = {
     "directional": directional,
     "spot": spot,
     "background": background,
+    "constant": constant,
+    "envmap": envmap,
 }
 
 #: Light kinds made by materials of the shapes carrying them (one line per kind).

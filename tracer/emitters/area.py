@@ -169,6 +169,116 @@ class _Triangle(_Flat):
         return lights.sample_triangle(u, self.p0, self.e1, self.e2)
 
 
+class _Triangles(_Flat):
+    """A set of triangles (a mesh, a polygon), sampled uniformly by total area.
+
+    A triangle is chosen with probability area_i / A from ``u.x`` (the first
+    index whose cumulative area exceeds u.x A, by binary search), u.x is
+    stretched back to [0, 1) within that triangle's share and the point placed
+    by the square-root warp; the density is 1 / A over the whole set, so the
+    estimate is L cos(theta_l) A / r^2 as for one flat shape, with theta_l
+    measured against the chosen triangle's normal (its winding's, as the
+    tracer's hits see it).
+    """
+    aim = (0.5, 0.5)
+
+    def __init__(self, shape):
+        v, f = self.triangles(shape)
+        p0, p1, p2 = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+        cross = np.cross(p1 - p0, p2 - p0)
+        twice = np.linalg.norm(cross, axis=1)
+        keep = twice > 0
+        p0, p1, p2, cross, twice = p0[keep], p1[keep], p2[keep], cross[keep], twice[keep]
+        areas = 0.5 * twice
+        self.area = float(areas.sum())
+        cdf = np.cumsum(areas) / self.area
+        cdf[-1] = 1.0
+        self.count = len(areas)
+        self.cdf = jit.Float(cdf.astype(np.float32))
+        self.lo = jit.Float(np.concatenate([[0.0], cdf[:-1]]).astype(np.float32))
+        self.p0 = _table(p0)
+        self.e1 = _table(p1 - p0)
+        self.e2 = _table(p2 - p0)
+        self.normals = _table(cross / twice[:, None])
+
+    @staticmethod
+    def triangles(shape):
+        """(vertices, faces) in world space."""
+        return np.asarray(shape.vertices, dtype=np.float64), np.asarray(shape.faces)
+
+    def sample(self, radiance, p, origin, u):
+        ux = u.x
+        i = dr.binary_search(0, self.count - 1,
+                             lambda k: dr.gather(jit.Float, self.cdf, k) <= ux)
+        lo = dr.gather(jit.Float, self.lo, i)
+        share = dr.gather(jit.Float, self.cdf, i) - lo
+        ux = dr.clip((ux - lo) / dr.maximum(share, 1e-30), 0, 0.99999994)
+        self.n = dr.gather(jit.Array3f, self.normals, i)
+        self._tri = (dr.gather(jit.Array3f, self.p0, i), dr.gather(jit.Array3f, self.e1, i),
+                     dr.gather(jit.Array3f, self.e2, i))
+        return super().sample(radiance, p, origin, jit.Array2f(ux, u.y))
+
+    def point(self, u):
+        p0, e1, e2 = self._tri
+        return lights.sample_triangle(u, p0, e1, e2)
+
+
+class _PolygonTriangles(_Triangles):
+    """A polygon, by the ear-clipped triangles the Mitsuba conversion gives Mitsuba too."""
+
+    @staticmethod
+    def triangles(shape):
+        from tracer.shapes.polygon import ear_clip, plane_frame
+
+        pts = np.asarray(shape.vertices, dtype=np.float64)
+        origin, u, v, _ = plane_frame(pts)
+        xy = (pts - origin) @ np.stack([u, v], axis=1)
+        return pts, np.asarray(ear_clip(xy))
+
+
+class _CylinderSide:
+    """Mitsuba's open cylinder, sampled uniformly by area on its side.
+
+    In the local unit cylinder (x^2 + y^2 = 1, 0 <= z <= 1) the point
+    (cos phi, sin phi, z), phi = 2 pi u.y, z = u.x, is uniform by area, and
+    stays so under a to_world that scales x and y alike (Mitsuba's cylinder
+    assumes the same); the area is 2 pi r l, the normal the radial direction.
+    Emitting from the front side, the outside.
+    """
+    aim = (0.5, 0.5)
+
+    def __init__(self, shape):
+        m = shape.local_to_world()
+        a = m[:3, :3]
+        r, length = float(np.linalg.norm(a[:, 0])), float(np.linalg.norm(a[:, 2]))
+        self.area = 2 * math.pi * r * length
+        self.m = a
+        self.t = m[:3, 3]
+        self.nm = np.linalg.inv(a).T
+
+    def sample(self, radiance, p, origin, u):
+        s, c = dr.sincos(2 * math.pi * u.y)
+        z = u.x
+        m, t, nm = self.m, self.t, self.nm
+        y = jit.Array3f(m[0, 0] * c + m[0, 1] * s + m[0, 2] * z + t[0],
+                        m[1, 0] * c + m[1, 1] * s + m[1, 2] * z + t[1],
+                        m[2, 0] * c + m[2, 1] * s + m[2, 2] * z + t[2])
+        n = dr.normalize(jit.Array3f(nm[0, 0] * c + nm[0, 1] * s, nm[1, 0] * c + nm[1, 1] * s,
+                                     nm[2, 0] * c + nm[2, 1] * s))
+        to_y = y - p
+        dist = dr.norm(to_y)
+        wi = to_y / dist
+        cos_l = -dr.dot(n, wi)
+        return wi, dist, dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
+
+    shadow_ray = staticmethod(_Flat.shadow_ray)
+
+
+def _table(a: np.ndarray):
+    a = np.asarray(a, dtype=np.float32)
+    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+
+
 #: Shape ``type`` -> how an emitter on it is sampled (one line per emitting shape kind).
 #: The order is that of the scene format's error message.
 SAMPLERS: dict[str, type] = {
@@ -176,6 +286,9 @@ SAMPLERS: dict[str, type] = {
     "rectangle": _Parallelogram,
     "triangle": _Triangle,
     "disk": _Ellipse,
+    "mesh": _Triangles,
+    "polygon": _PolygonTriangles,
+    "cylinder": _CylinderSide,
 }
 
 

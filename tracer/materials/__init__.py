@@ -20,14 +20,26 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.materials import classic, dielectric, diffuse, mirror, phong
+from tracer.materials import (
+    classic,
+    conductor,
+    dielectric,
+    diffuse,
+    mirror,
+    phong,
+    plastic,
+    thindielectric,
+)
 from tracer.materials.base import MaterialModel
 
 #: TOML ``type`` -> the module of that kind (one line per kind).
 REGISTRY: dict[str, ModuleType] = {
     "diffuse": diffuse,
     "mirror": mirror,
+    "conductor": conductor,
     "dielectric": dielectric,
+    "thindielectric": thindielectric,
+    "plastic": plastic,
     "phong": phong,
     "classic": classic,
 }

@@ -40,7 +40,7 @@ dispatches over kinds.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
@@ -54,6 +54,11 @@ dr = deferred("drjit")
 class MaterialModel:
     """A material of the scene model, the parsed ``[materials.NAME]`` table (a dataclass a kind)."""
     name: str
+    #: The TOML key ``opacity`` of every kind (Mitsuba's ``mask``): the material counts
+    #: with this weight, and the ray continues straight through with 1 - opacity (read
+    #: by the scene parser for every kind that does not read ``opacity`` itself, applied
+    #: by :mod:`tracer.materials.dispatch`)
+    mask_opacity: float = field(default=1.0, kw_only=True)
 
     #: Parts of this kind that only the tracer models, which a scene may declare in
     #: ``[compare] tracer_only`` (e.g. ``"schlick"``).
@@ -174,6 +179,31 @@ class BSDF:
         """
         value = self.emission(prm, si)
         return [] if value is None else [(value, self.emission_letters)]
+
+
+# --------------------------------------------------------------------------- parsing
+
+
+def parse_ior(t, key: str, default: float) -> float:
+    """An index of refraction: a positive number or one of Mitsuba's names (``tracer.ior``)."""
+    from tracer.ior import DIELECTRICS
+    from tracer.scene import _check_number, _number_schema, _range_text
+
+    number = _range_text("a number", 0, None, True, False)
+    v = t.raw(key, default, f"{number} or an IOR name",
+              {"anyOf": [_number_schema(0, None, True, False), {"enum": list(DIELECTRICS)}]})
+    if isinstance(v, str):
+        if v not in DIELECTRICS:
+            t.fail(key, f"unknown index of refraction {v!r} (a number, or one of "
+                        f"{', '.join(DIELECTRICS)})")
+        return DIELECTRICS[v]
+    return _check_number(t, key, v, number, 0, None, True, False)
+
+
+def parse_two_sided(t) -> bool:
+    """``two_sided`` (default true): false makes the surface black from behind, as a bare
+    Mitsuba BSDF is (behind: the side the shading normal points away from)."""
+    return t.boolean("two_sided", True)
 
 
 # --------------------------------------------------------------------------- tables

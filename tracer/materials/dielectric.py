@@ -52,8 +52,8 @@ MODEL = Dielectric
 
 
 def parse(t: _Table, name: str) -> Dielectric:
-    return Dielectric(name, ior=t.number("ior", 1.5, lo=0, lo_open=True),
-                      ext_ior=t.number("ext_ior", 1.0, lo=0, lo_open=True),
+    return Dielectric(name, ior=base.parse_ior(t, "ior", 1.5),
+                      ext_ior=base.parse_ior(t, "ext_ior", 1.0),
                       fresnel=t.string("fresnel", "exact", ("exact", "schlick")))
 
 

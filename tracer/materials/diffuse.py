@@ -5,7 +5,8 @@ Lambert's law (lecture 1, "The illumination equation"; pbrt-v4,
 equally in all directions, so the BRDF is a constant, and energy conservation
 bounds it by 1 / pi (the integral of cos over the hemisphere is pi). The
 reflectance is a colour or a checkerboard. Mitsuba's counterpart is the
-``diffuse`` plugin, made two-sided (``reference/materials/diffuse.py``).
+``diffuse`` plugin, made two-sided (``reference/materials/diffuse.py``)
+unless ``two_sided = false`` (black from behind, as Mitsuba's bare ``diffuse``).
 """
 
 from __future__ import annotations
@@ -25,6 +26,7 @@ if TYPE_CHECKING:
 @dataclass(frozen=True)
 class Diffuse(base.MaterialModel):
     reflectance: Texture = (0.5, 0.5, 0.5)
+    two_sided: bool = True
 
     def textures(self) -> tuple:
         return (self.reflectance,)
@@ -34,7 +36,7 @@ MODEL = Diffuse
 
 
 def parse(t: _Table, name: str) -> Diffuse:
-    return Diffuse(name, parse_texture(t, "reflectance", 0.5))
+    return Diffuse(name, parse_texture(t, "reflectance", 0.5), base.parse_two_sided(t))
 
 
 class BSDF(base.BSDF):

@@ -23,6 +23,7 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
+from tracer import faults
 from tracer.backend import jit
 from tracer.materials import REGISTRY, type_of
 from tracer.materials.base import MaterialModel, ShadingPoint
@@ -53,12 +54,18 @@ def _or(masks: list, fallback):
 class Closure:
     """The materials at one wavefront of hits (see the module docstring)."""
 
-    def __init__(self, parts: list, si: ShadingPoint, valid):
+    def __init__(self, parts: list, si: ShadingPoint, valid, opacity=None):
         self.parts = parts          # (bsdf, mask, params) of each present kind
         self.si = si
+        #: per lane, the material's opacity (None: every material is opaque)
+        self.opacity = opacity
         no = dr.zeros(jit.Bool, dr.width(valid))
         #: lanes whose material has a smooth part (direct light is summed there)
         self.smooth = _or([mask for bsdf, mask, _ in parts if bsdf.smooth], no)
+
+    def _opaque(self, value):
+        """``value`` weighted by the opacity (Mitsuba's ``mask`` scales its material by it)."""
+        return value if self.opacity is None else value * self.opacity
 
     def eval(self, wi):
         """f(wo, wi) of the smooth part of each lane's material (no cosine)."""
@@ -67,14 +74,14 @@ class Closure:
             if bsdf.smooth:
                 fk = bsdf.eval(prm, self.si, wi)
                 f = fk if f is None else dr.select(mask, fk, f)
-        return f
+        return None if f is None else self._opaque(f)
 
     def emission(self) -> list[tuple[Any, Any, str]]:
         """(lanes, radiance, light-path letters) of each kind that emits here."""
         out = []
         for bsdf, mask, prm in self.parts:
             if bsdf.emits:
-                out += [(mask, value, letters)
+                out += [(mask, self._opaque(value), letters)
                         for value, letters in bsdf.emission_terms(prm, self.si)]
         return out
 
@@ -85,6 +92,11 @@ class Closure:
         lobes get weight 0 there (and are dropped by the integrator).
         """
         slots: list[Slot] = []
+        beta = throughput
+        if self.opacity is not None:
+            # Mitsuba's mask: the material's lobes weighted by the opacity, and one more
+            # ray straight through with 1 - opacity (no scattering event: letter "").
+            throughput = throughput * self.opacity
         for bsdf, mask, prm in self.parts:
             if not bsdf.lobes:
                 continue
@@ -100,6 +112,13 @@ class Closure:
                 s = slots[i]
                 s.letters[lobe.letter] = _or([s.letters.get(lobe.letter), mask], None)
                 s.kinds[lobe.kind] = _or([s.kinds.get(lobe.kind), mask], None)
+        if self.opacity is not None:
+            through = self.opacity < 1
+            w_through = beta * (1 - self.opacity)
+            if faults.on("mask-passthrough-unweighted"):
+                w_through = beta
+            slots.append(Slot(self.si.d, dr.select(through, w_through, 0),
+                              {"": through}, {"transmit": through}))
         return slots
 
 
@@ -121,14 +140,28 @@ class SceneMaterials:
         self.kind = jit.UInt32(np.asarray(kind, dtype=np.uint32))
         self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
         self.has_smooth = any(k.smooth for k in self.kinds)
-        self.has_delta = any(k.lobes for k in self.kinds)
+        # Materials with ``two_sided = false`` are black where the ray arrives from behind
+        # (the side the shading normal points away from), as a bare Mitsuba BSDF is.
+        one_sided = [getattr(m, "two_sided", True) is False for m in materials]
+        self.has_one_sided = any(one_sided)
+        opacity = [m.mask_opacity for m in materials]
+        #: some material is not opaque (``opacity`` < 1, Mitsuba's ``mask``)
+        self.has_mask = any(o != 1 for o in opacity)
+        self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
+        self.one_sided = jit.Bool(np.asarray(one_sided + [False], dtype=bool))
+        self.has_delta = any(k.lobes for k in self.kinds) or self.has_mask
 
     def at(self, mid, si: ShadingPoint, valid) -> Closure:
         """The materials of material ids ``mid`` at the hits ``si`` (lanes in ``valid``)."""
         kind = dr.gather(jit.UInt32, self.kind, mid, valid)
         row = dr.gather(jit.UInt32, self.row, mid, valid)
         parts = []
+        opacity = None
+        if self.has_mask:
+            opacity = dr.select(valid, dr.gather(jit.Float, self.opacity, mid, valid), 1.0)
+        if self.has_one_sided:  # black from behind: no kind answers for those lanes
+            valid = valid & ~(dr.gather(jit.Bool, self.one_sided, mid, valid) & (si.cos_i < 0))
         for i, bsdf in enumerate(self.kinds):
             mask = valid & (kind == i)
             parts.append((bsdf, mask, bsdf.params(row, si, mask)))
-        return Closure(parts, si, valid)
+        return Closure(parts, si, valid, opacity)

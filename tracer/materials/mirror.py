@@ -27,13 +27,14 @@ Color = tuple[float, float, float]
 @dataclass(frozen=True)
 class Mirror(base.MaterialModel):
     reflectance: Color = (1.0, 1.0, 1.0)
+    two_sided: bool = True
 
 
 MODEL = Mirror
 
 
 def parse(t: _Table, name: str) -> Mirror:
-    return Mirror(name, t.color("reflectance", 1.0, hi=1.0))
+    return Mirror(name, t.color("reflectance", 1.0, hi=1.0), base.parse_two_sided(t))
 
 
 class BSDF(base.BSDF):

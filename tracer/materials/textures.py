@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -23,6 +24,9 @@ if TYPE_CHECKING:
 
 dr = deferred("drjit")
 texture = deferred("tracer.texture")
+
+#: Bitmap wrap modes (the kernel's codes are their indices; tracer.texture.WRAP_MODES).
+WRAP_MODES = ("repeat", "mirror", "clamp")
 
 Color = tuple[float, float, float]
 
@@ -41,11 +45,76 @@ class Checkerboard:
         return max(max(self.color0), max(self.color1))
 
 
-Texture = Color | Checkerboard
+@dataclass(frozen=True, eq=False)
+class Bitmap:
+    """Mitsuba's bitmap texture: an image file looked up at the shape's uv.
+
+    ``texels`` are the linear RGB values (H x W x 3, float32, row 0 the image's top
+    row): an 8-bit PNG decoded from sRGB unless ``raw`` (then value / 255), an
+    OpenEXR file as stored.
+    """
+    filename: str                 # absolute path
+    texels: np.ndarray
+    filter_type: str = "bilinear"  # or "nearest"
+    raw: bool = False
+    wrap_mode: str = "repeat"      # or "mirror", "clamp"
+
+    def max(self) -> float:
+        return float(self.texels.max()) if self.texels.size else 0.0
+
+
+Texture = Color | Checkerboard | Bitmap
 
 
 def texture_max(t: Texture) -> float:
-    return t.max() if isinstance(t, Checkerboard) else max(t)
+    return t.max() if isinstance(t, (Checkerboard, Bitmap)) else max(t)
+
+
+def srgb_decode(v: np.ndarray) -> np.ndarray:
+    """sRGB-encoded values in [0, 1] to linear (IEC 61966-2-1: the linear toe below
+    0.04045, else ((v + 0.055) / 1.055)^2.4), in float64."""
+    v = np.asarray(v, dtype=np.float64)
+    return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
+
+
+def load_bitmap(t: _Table, key: str, path: Path, raw: bool) -> np.ndarray:
+    """The texels of an image file (PNG or OpenEXR) as linear float32 RGB; one-line errors."""
+    suffix = path.suffix.lower()
+    if not path.is_file():
+        t.fail(key, f"no such image file: {path}")
+    try:
+        if suffix == ".exr":
+            from tracer.imageio import read_exr
+
+            return np.ascontiguousarray(read_exr(path), dtype=np.float32)
+        if suffix == ".png":
+            from PIL import Image
+
+            with Image.open(path) as im:
+                if im.mode not in ("L", "LA", "RGB", "RGBA", "P"):
+                    t.fail(key, f"{path.name}: an 8-bit PNG is expected, got mode {im.mode}")
+                rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
+            return (rgb if raw else srgb_decode(rgb)).astype(np.float32)
+    except (OSError, ValueError, KeyError) as e:
+        t.fail(key, f"cannot read {path.name}: {e}")
+    t.fail(key, f"{path.name}: expected a .png or .exr image")
+    raise AssertionError  # unreachable: fail raises
+
+
+def _parse_bitmap(bm: _Table, hi: float | None) -> Bitmap:
+    name = bm.string("filename")
+    path = (Path(bm.path).parent / name).resolve()
+    filter_type = bm.string("filter_type", "bilinear", ("bilinear", "nearest"))
+    raw = bm.boolean("raw", False)
+    wrap = bm.string("wrap_mode", "repeat", WRAP_MODES)
+    texels = load_bitmap(bm, "filename", path, raw)
+    if not np.isfinite(texels).all() or texels.min() < 0:
+        bm.fail("filename", f"{path.name}: texel values must be finite and >= 0")
+    if hi is not None and texels.max() > hi:
+        bm.fail("filename", f"{path.name}: texel values must be <= {hi:g} here, the largest "
+                            f"is {texels.max():g}")
+    bm.finish()
+    return Bitmap(str(path), texels, filter_type, raw, wrap)
 
 
 def parse_texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Texture:
@@ -82,6 +151,7 @@ def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
 #: Texture kinds: the key that names each in TOML -> its parser (sub-table, highest value).
 TEXTURES = {
     "checkerboard": _parse_checkerboard,
+    "bitmap": _parse_bitmap,
 }
 
 
@@ -89,7 +159,7 @@ class TextureTable:
     """One texture parameter of a kind's materials, packed as Dr.Jit tables (a row each)."""
 
     def __init__(self, textures: list[Texture]):
-        rows = [(t, None) if not isinstance(t, Checkerboard) else ((0, 0, 0), t)
+        rows = [(t, None) if not isinstance(t, (Checkerboard, Bitmap)) else ((0, 0, 0), t)
                 for t in textures]
 
         def col(values):
@@ -97,6 +167,27 @@ class TextureTable:
             return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
 
         self.color = col([c for c, _ in rows])
+        bitmaps = [b if isinstance(b, Bitmap) else None for _, b in rows]
+        rows = [(c, b if isinstance(b, Checkerboard) else None) for c, b in rows]
+        self.has_bitmap = any(b is not None for b in bitmaps)
+        if self.has_bitmap:
+            offsets, sizes, data, offset = [], [], [], 0
+            for b in bitmaps:
+                h, w = (1, 1) if b is None else b.texels.shape[:2]
+                offsets.append(offset)
+                sizes.append((w, h))
+                data.append(np.zeros((1, 3), np.float32) if b is None else
+                            b.texels.reshape(-1, 3))
+                offset += w * h
+            self.is_bitmap = jit.Bool(np.asarray([b is not None for b in bitmaps]))
+            self.texels = col(np.concatenate(data))
+            self.offset = jit.UInt32(np.asarray(offsets, dtype=np.uint32))
+            sz = np.asarray(sizes, dtype=np.float32)
+            self.size = jit.Array2f(sz[:, 0], sz[:, 1])
+            self.bilinear = jit.Bool(np.asarray([b is not None and b.filter_type == "bilinear"
+                                                 for b in bitmaps]))
+            self.wrap = jit.UInt32(np.asarray([0 if b is None else WRAP_MODES.index(b.wrap_mode)
+                                               for b in bitmaps], dtype=np.uint32))
         boards = [b for _, b in rows]
         self.has_checker = any(b is not None for b in boards)
         if self.has_checker:
@@ -111,8 +202,16 @@ class TextureTable:
     def eval(self, row, uv, active) -> Any:
         """The texture's colour at ``uv`` for each lane's material ``row`` (Array3f)."""
         value = gather(self.color, row, active)
-        if not self.has_checker:
-            return value
-        board = texture.checkerboard(uv, gather(self.scale, row, active),
-                                     gather(self.c0, row, active), gather(self.c1, row, active))
-        return dr.select(gather(self.checker, row, active), board, value)
+        if self.has_checker:
+            board = texture.checkerboard(uv, gather(self.scale, row, active),
+                                         gather(self.c0, row, active),
+                                         gather(self.c1, row, active))
+            value = dr.select(gather(self.checker, row, active), board, value)
+        if self.has_bitmap:
+            on = gather(self.is_bitmap, row, active)
+            size = gather(self.size, row, active)
+            image = texture.bitmap(uv, self.texels, gather(self.offset, row, active), size.x,
+                                   size.y, gather(self.bilinear, row, active),
+                                   gather(self.wrap, row, active), active & on)
+            value = dr.select(on, image, value)
+        return value

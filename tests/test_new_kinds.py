@@ -1,0 +1,197 @@
+"""The material kinds of Mitsuba's BSDF set beyond the lectures': their data and formulas.
+
+Each kind is also rendered against Mitsuba by the built-in scene that shows it
+(``scenes/metals.toml``, ...: ``tests/test_cross_render.py`` at float
+precision), and its formula bug is caught by ``whitted mutants``
+(``tests/test_mutants.py``); here the parts that are checked on their own.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from reference import mutants  # noqa: F401  (declares the catalog's fault ids)
+from tracer import faults
+from tracer.ior import CONDUCTORS, DIELECTRICS
+from tracer.scene import SceneError, parse_scene
+
+
+def test_named_indices_are_mitsubas(mi):
+    # The tables are Mitsuba's own values rounded to 6 decimals (docs/ior_tables.py), so
+    # they agree to 5e-7 plus float32 rounding of the value (6e-8 relative).
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location(
+        "ior_tables", Path(__file__).parents[1] / "docs" / "ior_tables.py")
+    tables = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(tables)
+    for name in tables.DIELECTRIC_NAMES:
+        assert DIELECTRICS[name] == pytest.approx(tables.dielectric_ior(mi, name), abs=6e-7)
+    assert set(CONDUCTORS) - {"none"} == set(tables.conductor_names(mi))
+    for name in CONDUCTORS:
+        if name == "none":
+            continue
+        eta, k = tables.conductor_rgb(mi, name)
+        np.testing.assert_allclose(CONDUCTORS[name][0], eta, atol=6e-7, rtol=6e-8)
+        np.testing.assert_allclose(CONDUCTORS[name][1], k, atol=6e-7, rtol=6e-8)
+
+
+def test_conductor_fresnel_matches_mitsuba_within_float32_rounding(mi):
+    from reference.fresnel_curves import conductor_curves
+
+    rows = conductor_curves(mi, step=1.0)
+    assert rows and all(r["pass"] for r in rows), [r for r in rows if not r["pass"]]
+    # The same check sees a conductor Fresnel term without k (the catalog's bug).
+    with faults.active("conductor-k-ignored"):
+        broken = conductor_curves(mi, names=("Au",), step=1.0)
+    assert not all(r["pass"] for r in broken)
+
+
+def _material(table: dict):
+    scene = parse_scene({"film": {"width": 8, "height": 8},
+                         "camera": {"origin": [0, 0, 5], "target": [0, 0, 0]},
+                         "materials": {"m": table},
+                         "lights": [{"type": "point", "position": [0, 1, 0], "intensity": 1}],
+                         "shapes": [{"type": "sphere", "material": "m"}]})
+    return scene.materials["m"]
+
+
+def test_named_iors_and_conductors_are_read_and_unknown_names_refused():
+    assert _material({"type": "dielectric", "ior": "bk7", "ext_ior": "air"}).eta == \
+        pytest.approx(1.5046 / 1.000277)
+    assert _material({"type": "conductor", "material": "Au"}).eta == CONDUCTORS["Au"][0]
+    assert _material({"type": "conductor"}).k == (1.0, 1.0, 1.0)  # "none": a mirror
+    with pytest.raises(SceneError, match="unknown index of refraction 'glas'"):
+        _material({"type": "dielectric", "ior": "glas"})
+    with pytest.raises(SceneError, match="unknown conductor 'Gold'"):
+        _material({"type": "conductor", "material": "Gold"})
+    with pytest.raises(SceneError, match="either material or eta and k"):
+        _material({"type": "conductor", "material": "Au", "eta": 1, "k": 1})
+    with pytest.raises(SceneError, match="two_sided"):
+        _material({"type": "diffuse", "two_sided": 0})
+
+
+def test_diffuse_fresnel_reflectance_fit_is_mitsubas(mi, jit):
+    # Both evaluate the same two published fits in float32 (tracer.fresnel docstring):
+    # a few ulps of F_dr <= 1 apart at most (8 ulp of 1 = 1e-6).
+    from tracer import fresnel
+
+    eta = np.linspace(0.2, 5, 400, dtype=np.float32)
+    ours = np.asarray(fresnel.fresnel_diffuse_reflectance(jit.Float(eta)))
+    theirs = np.asarray(mi.fresnel_diffuse_reflectance(mi.Float(eta)))
+    assert np.abs(ours - theirs).max() <= 1e-6
+    # F_dr grows from 0 at eta = 1 (no boundary) towards 1 (nearly all light trapped).
+    at_one = np.asarray(fresnel.fresnel_diffuse_reflectance(jit.Float([1.0])))[0]
+    assert at_one < 1e-3 and ours[0] > 0.9
+
+
+def test_area_lights_on_a_mesh_a_polygon_and_a_cylinder_agree_with_mitsuba(tmp_path):
+    # Mitsuba samples these emitters its own way (no shared light samples), so the
+    # one-lobe reference judges them by the z-test of reference.compare (Sidak alpha
+    # 0.01 per pixel, >= 99.75 % passing; regions within alpha 0.001), the tracer's
+    # image the mean of 16 seeds.
+    from reference.compare import compare_scene
+    from tracer import load_scene
+
+    scene = load_scene(Path(__file__).parent / "data" / "shape_lights.toml")
+    result, tracer_img, _ = compare_scene(scene, tmp_path, second_opinion=False)
+    assert result.reference == "onelobe" and result.test == "z-test"
+    assert result.passed, result.checks
+    assert tracer_img.max() > 0
+
+
+BITMAP_SCENE = """
+[film]
+width = 64
+height = 48
+spp = 4
+max_depth = 3
+[camera]
+origin = [0, 2.5, 4]
+target = [0, 0.3, 0]
+fov = 50
+[materials.floor]
+type = "diffuse"
+reflectance = {{ bitmap = {{ filename = "tex.png" }} }}
+[materials.ball]
+type = "plastic"
+diffuse_reflectance = {{ bitmap = {{ filename = "tex.png", filter_type = "nearest" }} }}
+[materials.star]
+type = "diffuse"
+reflectance = {{ bitmap = {{ filename = "tex.exr", wrap_mode = "{wrap}", raw = true }} }}
+[materials.raw]
+type = "diffuse"
+reflectance = {{ bitmap = {{ filename = "tex.png", raw = true, wrap_mode = "mirror" }} }}
+[[lights]]
+type = "point"
+position = [1, 4, 3]
+intensity = 30
+[[shapes]]
+type = "rectangle"
+material = "floor"
+to_world = [ {{ scale = 3 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }} ]
+[[shapes]]
+type = "sphere"
+center = [-0.9, 0.5, 0]
+radius = 0.5
+material = "ball"
+# Polygons' uvs are their plane's own coordinates, beyond [0, 1]: the wrap modes show.
+[[shapes]]
+type = "polygon"
+material = "star"
+vertices = [[0.2, 0.01, -1.0], [1.6, 0.01, -1.2], [1.9, 0.01, 0.4], [0.5, 0.01, 0.8]]
+[[shapes]]
+type = "polygon"
+material = "raw"
+vertices = [[-1.8, 0.01, 0.6], [-0.4, 0.01, 0.7], [-0.6, 0.01, 1.6], [-1.9, 0.01, 1.5]]
+"""
+
+
+def _bitmap_scene(tmp_path, wrap="repeat"):
+    import tomllib
+
+    from PIL import Image
+
+    from tracer.imageio import write_exr
+
+    rng = np.random.default_rng(7)
+    # Odd sizes, so that rows and columns cannot be swapped unnoticed.
+    Image.fromarray(rng.integers(0, 256, (5, 7, 3), dtype=np.uint8)).save(tmp_path / "tex.png")
+    write_exr(tmp_path / "tex.exr", rng.uniform(0.05, 0.95, (3, 4, 3)).astype(np.float32))
+    return parse_scene(tomllib.loads(BITMAP_SCENE.format(wrap=wrap)),
+                       str(tmp_path / "scene.toml"))
+
+
+@pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
+def test_bitmap_textures_agree_with_mitsuba_at_float_precision(tmp_path, wrap):
+    from reference.compare import compare_scene
+
+    scene = _bitmap_scene(tmp_path, wrap)
+    result, tracer_img, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
+    assert result.reference == "deterministic" and result.test == "exact-strata"
+    assert result.passed, result.checks
+    assert result.metrics["median_rel"] < 1e-5
+
+
+def test_bitmap_texture_rows_read_from_the_top_as_mitsuba_does(tmp_path):
+    # The same comparison fails with v measured from the bottom (the catalog's bug).
+    from reference.compare import compare_scene
+
+    scene = _bitmap_scene(tmp_path)
+    with faults.active("bitmap-v-flipped"):
+        result, _, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
+    assert not result.passed
+
+
+def test_bitmap_errors_are_one_line(tmp_path):
+    import tomllib
+
+    text = BITMAP_SCENE.format(wrap="repeat")
+    with pytest.raises(SceneError, match="no such image file"):
+        parse_scene(tomllib.loads(text), str(tmp_path / "scene.toml"))
+    (tmp_path / "tex.png").write_bytes(b"not a png")
+    with pytest.raises(SceneError, match="cannot read tex.png"):
+        parse_scene(tomllib.loads(text), str(tmp_path / "scene.toml"))
