@@ -36,11 +36,21 @@ reflection with probability R (weight 1) or transmission with 1 - R (weight
 (n_i / n_t)^2); a ``BSDFContext`` that keeps one component returns that one
 with probability 1 and its whole weight, which is what the deterministic
 reference asks for.
+
+LuxCore (:func:`luxcore`): ``glass`` with ``kr = kt = 1``, ``interiorior`` =
+``ior`` (behind the normal) and ``exteriorior`` = ``ext_ior``: exact Fresnel
+reflectance R, transmission 1 - R, total internal reflection. Its
+transmitted radiance carries the (n_i / n_t)^2 factor per crossing as the
+tracer's (measured: a camera inside glass seeing a diffuse wall agrees with
+the tracer). Schlick's approximation has no LuxCore equivalent: a declared
+``"schlick"`` is compared exact, as with Mitsuba; an undeclared one is refused.
 """
 
 from __future__ import annotations
 
 import drjit as dr
+
+from tracer.errors import UserError
 
 from tracer.materials.dielectric import Dielectric
 
@@ -50,6 +60,14 @@ PLUGINS = ("whitted_schlick",)
 
 def mitsuba(m: Dielectric) -> dict:
     return {"type": "dielectric", "int_ior": ("float", m.ior), "ext_ior": ("float", m.ext_ior)}
+
+
+def luxcore(m: Dielectric) -> dict:
+    if m.fresnel != "exact":
+        raise UserError(f"material {m.name!r}: Schlick's Fresnel has no LuxCore equivalent "
+                        "(declare it in [compare] tracer_only to compare it exact)")
+    return {"type": "glass", "kr": (1.0, 1.0, 1.0), "kt": (1.0, 1.0, 1.0),
+            "interiorior": m.ior, "exteriorior": m.ext_ior}
 
 
 def mitsuba_model(m: Dielectric) -> dict | None:

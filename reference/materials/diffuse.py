@@ -1,15 +1,28 @@
-"""Mitsuba conversion of ``diffuse`` (tracer/materials/diffuse.py): a two-sided ``diffuse``.
+"""Conversions of ``diffuse`` (tracer/materials/diffuse.py): Mitsuba and LuxCore.
 
 Mitsuba's ``diffuse`` is one-sided (black from behind); the tracer's diffuse
 surfaces are two-sided, as Mitsuba's ``twosided`` wrapper makes them.
+
+LuxCore's ``matte`` is the Lambertian BRDF rho / pi (``kd`` = rho), lit from
+both sides as the tracer's; a checkerboard reflectance is refused (LuxCore's
+``checkerboard2d`` maps uv by its own rules, not verified to match).
 """
 
 from __future__ import annotations
 
 from reference.materials.textures import texture_tree
+from tracer.errors import UserError
 from tracer.materials.diffuse import Diffuse
 
 
 def mitsuba(m: Diffuse) -> dict:
     return {"type": "twosided",
             "material": {"type": "diffuse", "reflectance": texture_tree(m.reflectance)}}
+
+
+def luxcore(m: Diffuse) -> dict:
+    """LuxCore ``matte``: f = kd / pi, the same Lambertian BRDF."""
+    if not isinstance(m.reflectance, tuple):
+        raise UserError(f"material {m.name!r}: a textured diffuse reflectance has no LuxCore "
+                        "equivalent here (only plain colours convert)")
+    return {"type": "matte", "kd": tuple(m.reflectance)}
