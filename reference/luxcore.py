@@ -7,19 +7,25 @@ disagree a third image makes it a vote (:mod:`reference.luxcore_compare`).
 
 How it renders (:mod:`reference.luxcore_scene` for the scene):
 
-* ``PATHCPU`` with the ``RANDOM`` sampler, ``passes`` times with different
-  seeds, each pass ``spp_per_pass`` samples per film pixel (PATHCPU's halt
-  overshoots by a few samples; each pass's mean is unbiased whatever its
-  count). ``TILEPATHCPU`` would give exactly N^2 samples and the same image
-  on every run, but it ignores ``renderengine.seed`` (measured: two seeds, the
-  same image to the bit), so its repeats carry no noise estimate.
-* The film is K s times the image (s = the scene's strata per pixel side,
-  K = ``SUBPIXELS``); each stratum keeps its centre sub-pixel, and a pixel is
-  the mean of its s x s strata: the tracer's sample positions, to within a
-  square 1 / (K s) pixel wide.
-* Noise: the P passes are independent, so the variance of their mean is the
-  spread of the pass means / P (per channel, and of the channel sum for the
-  region sums), an unbiased estimate with P - 1 degrees of freedom.
+* ``PATHCPU`` with the ``RANDOM`` sampler, one sample per film pixel per
+  pass, ``passes`` passes with different seeds. ``TILEPATHCPU`` would give
+  exactly N^2 samples and the same image on every run, but it ignores
+  ``renderengine.seed`` (measured: two seeds, the same image to the bit), so
+  its repeats carry no noise estimate. PATHCPU is fast per sample on a large
+  film at one sample per pass and slow at many samples per pixel of a small
+  one (measured at 64 x 48: 0.2 s per sample per pixel, against 0.5 s for a
+  448 x 336 film at one sample), so a pixel's samples are spread over a film
+  ``SUBSAMPLES`` times larger on each side.
+* Pixel = the mean of its SUBSAMPLES^2 sub-pixels (filter ``NONE``): a
+  stratified estimate of the mean of radiance over the pixel's square, which
+  the tracer's and Mitsuba's strata centres approximate by the midpoint rule
+  (:mod:`reference.luxcore_compare` renders them with many strata).
+* Noise, as Mitsuba's pooled reference (reference/compare.py, rules 1 and
+  4): the per-sample second moment over all N = passes x SUBSAMPLES^2
+  samples, (E[x^2] - E[x]^2) / N, an upper bound for the variance of a
+  stratified mean (it includes the variation across the pixel, edges
+  included); and the spread of the passes' means / passes, unbiased, for the
+  region sums.
 
 LuxCore runs in ``python -m reference.luxcore_runner`` under a time limit,
 one child for a list of scenes (:func:`render_many`), so its allocator and
@@ -45,8 +51,11 @@ from tracer.errors import UserError
 VERSION = "2.11.2"
 INSTALL_HINT = ("LuxCore is not installed: pip install 'whitted[luxcore]' "
                 f"(pyluxcore {VERSION}), or `make setup`")
-#: Independent passes per render (the variance has PASSES - 1 degrees of freedom).
-PASSES = 16
+#: Independent passes per render (their spread has PASSES - 1 degrees of freedom per pixel).
+PASSES = 4
+#: Film sub-pixels per image pixel side: PASSES x SUBSAMPLES^2 = 1024 samples per pixel, as
+#: Mitsuba's pooled sampling reference (reference.compare.ZTEST_SAMPLES).
+SUBSAMPLES = 16
 #: Samples per film pixel per pass.
 SPP_PER_PASS = 1
 #: Seconds a child may run per pass, on top of a fixed start-up allowance.
@@ -71,20 +80,17 @@ def require() -> None:
 class LuxResult:
     """LuxCore's image of a scene and the noise of that image."""
     image: np.ndarray          # H x W x 3 float32: mean of the passes
-    variance: np.ndarray       # H x W x 3: variance of that mean, from the passes' spread
-    pass_variance: np.ndarray  # H x W: the same for the channel sum
+    variance: np.ndarray       # H x W x 3: of that mean, from the per-sample second moment
+    pass_variance: np.ndarray | None  # H x W: channel sum, from the passes' spread
     passes: int
-    samples: int               # nominal samples per pixel over all passes
+    samples: int               # samples per pixel over all passes
     seconds: float
 
 
 def pixels_of(film: np.ndarray, desc: Description) -> np.ndarray:
-    """H x W x 3: per pixel, the mean of its strata's centre sub-pixels (module docstring)."""
-    k, s = desc.subpixels, desc.strata
-    c = k // 2
-    centres = film[c::k, c::k]                       # one per stratum: (H s) x (W s)
-    h, w = desc.height, desc.width
-    return centres.reshape(h, s, w, s, 3).mean(axis=(1, 3))
+    """H x W x k x k x 3: each pixel's sub-pixels (k = desc.subsamples)."""
+    k, h, w = desc.subsamples, desc.height, desc.width
+    return film.reshape(h, k, w, k, 3).transpose(0, 2, 1, 3, 4)
 
 
 def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: int,
@@ -114,7 +120,7 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
     PASS_TIMEOUT per pass).
     """
     require()
-    descs = [describe(s) for s in scenes]   # refuse before anything starts
+    descs = [describe(s, subsamples=SUBSAMPLES) for s in scenes]  # refuse before starting
     seeds = [seed * 1000 + k for k in range(passes)]
     total = passes * len(scenes)
     if timeout is None:
@@ -163,14 +169,15 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
 
 def _result(desc: Description, films: np.ndarray, spp_per_pass: int,
             seconds: float) -> LuxResult:
-    per_pass = np.stack([pixels_of(f.astype(np.float64), desc) for f in films])
-    p = len(per_pass)
-    mean = per_pass.mean(0)
-    var = per_pass.var(0, ddof=1) / p if p > 1 else np.full_like(mean, np.inf)
-    sums = per_pass.sum(-1)
-    pass_var = sums.var(0, ddof=1) / p if p > 1 else np.full(mean.shape[:2], np.inf)
-    return LuxResult(mean.astype(np.float32), var.astype(np.float32), pass_var, p,
-                     p * spp_per_pass * desc.strata ** 2, seconds)
+    subs = np.stack([pixels_of(f.astype(np.float64), desc) for f in films])  # P H W k k 3
+    p = len(subs)
+    n = p * desc.subsamples ** 2 * spp_per_pass
+    mean = subs.mean(axis=(0, 3, 4))
+    m2 = (subs ** 2).mean(axis=(0, 3, 4))
+    var = np.maximum(m2 - mean ** 2, 0) / n
+    sums = subs.mean(axis=(3, 4)).sum(-1)            # P x H x W: each pass's channel sum
+    pass_var = sums.var(0, ddof=1) / p if p > 1 else None
+    return LuxResult(mean.astype(np.float32), var.astype(np.float32), pass_var, p, n, seconds)
 
 
 def render(scene, passes: int = PASSES, seed: int = 0, spp_per_pass: int = SPP_PER_PASS,

@@ -15,7 +15,7 @@ perspective camera       ``perspective``, ``lookat``; ``fieldofview`` applies to
 orthographic camera      ``orthographic``, ``screenwindow`` = the view's half
                          width w / 2 by w H / (2 W) in world units
 film                     filter ``NONE`` (raw pixel means), ``RGB`` output
-                         (radiance, no tone mapping), ``K`` times the size
+                         (radiance, no tone mapping), ``imagepipeline`` NOP
                          (pixel positions below)
 diffuse                  ``matte`` (kd / pi), lit from both sides
 mirror                   ``mirror`` (kr)
@@ -38,14 +38,16 @@ max_depth M              ``path.pathdepth``: total = M - 1 + 1, diffuse 2,
                          glossy 2, specular M - 1 (see :func:`config_props`)
 =======================  ====================================================
 
-Pixel positions. Every LuxCore sampler jitters inside the pixel, while the
-tracer and Mitsuba put their samples at the centres of an s x s grid of
-strata. So LuxCore renders the film K s times larger and the harness keeps,
-for each stratum, the sub-pixel at its centre (K odd): an estimate over a
-square 1 / (K s) of a pixel wide around the stratum's centre, which on
-smooth radiance is the centre's value to second order (measured: 3e-4 on a
-plane at K = 3) and near an edge differs only in the pixels the edge crosses
-within that square. The perspective camera maps film row y to raster row
+Pixel positions. Every LuxCore sampler jitters inside the pixel, so
+LuxCore's pixel is the mean of radiance over the pixel's square (filter
+``NONE``), while the tracer and Mitsuba put their samples at the centres of
+an s x s grid of strata, a midpoint rule for the same mean. The comparison
+(:mod:`reference.luxcore_compare`) renders those two sides with many strata
+so that both estimate the same integral. ``subsamples`` k renders the film k
+times larger on each side, k x k film pixels per image pixel
+(:mod:`reference.luxcore` averages them).
+
+The perspective and orthographic cameras map film row y to raster row
 filmHeight - y - 1, one row off after the image is flipped: the screen
 window is moved by one film row (towards -y) to put it back.
 """
@@ -79,7 +81,6 @@ from tracer.scene import (
 #: Largest distance of a tessellated shape's chords from the surface, relative to its size.
 TESSELLATION = 1e-4
 #: Film sub-pixels per stratum side (odd: one sits at the stratum's centre).
-SUBPIXELS = 3
 
 
 @dataclass
@@ -89,14 +90,12 @@ class Description:
     meshes: dict = field(default_factory=dict)      # name -> (vertices, faces, normals|None)
     width: int = 0                                  # the scene's image
     height: int = 0
-    strata: int = 1
-    subpixels: int = SUBPIXELS
+    subsamples: int = 1                             # film pixels per image pixel side
     max_depth: int = 2
 
     @property
     def film_size(self) -> tuple[int, int]:
-        k = self.strata * self.subpixels
-        return self.width * k, self.height * k
+        return self.width * self.subsamples, self.height * self.subsamples
 
     def text(self) -> str:
         return props_text(self.props)
@@ -307,11 +306,11 @@ def config_props(desc: Description, seed: int = 0, spp_per_pass: int = 1,
 # ------------------------------------------------------------------ scene
 
 
-def describe(scene: Scene, subpixels: int = SUBPIXELS) -> Description:
+def describe(scene: Scene, subsamples: int = 1) -> Description:
     """The scene in LuxCore's terms; one-line UserError for what does not map."""
     film = scene.film
-    desc = Description(width=film.width, height=film.height, strata=film.strata,
-                       subpixels=subpixels, max_depth=film.max_depth)
+    desc = Description(width=film.width, height=film.height, subsamples=subsamples,
+                       max_depth=film.max_depth)
     if scene.tracer_only:
         from reference.compare import comparable
 
