@@ -3,46 +3,53 @@
 Where the tracer and Mitsuba disagree, one of them is wrong and only a person
 could say which; LuxCore (:mod:`reference.luxcore`) is a third, independent
 opinion. Each scene is rendered small (:func:`luxcore_scene`: at most
-``PIXELS`` pixels) by
+``PIXELS`` pixels).
 
-* the tracer, with ``STRATA`` x ``STRATA`` samples per pixel at the strata
-  centres (where it samples area lights: the mean of ``TRACER_SEEDS`` seeds,
-  with their noise, as :func:`reference.compare.tracer_pooled`);
+Same pixels. LuxCore's pixel is the mean of radiance over the pixel's square
+(its samples jitter); the tracer and Mitsuba sample fixed strata centres, a
+midpoint rule of that mean which is off by up to the edge's contrast / (2 s)
+wherever an edge crosses a pixel, coherently along a straight edge
+(measured on sphere_point: the image row where the floor ends was 1 %
+brighter in LuxCore all along it, |Z| = 14 for its tile). So the tracer and
+Mitsuba render ``PASSES`` times with their whole grid of STRATA x STRATA
+strata shifted by an offset within a stratum (:func:`shifted`, the camera's
+``pixel_offset``). The offsets are a rank-1 lattice, ((k + 1/2) / P,
+((7 k mod P) + 1/2) / P) of a stratum for P = 16: their mean is the
+stratum's centre, and along each axis they take P distinct values, so a
+horizontal or vertical edge is resolved to 1 / (STRATA x P) = 1/128 of a
+pixel (a square grid of 16 offsets would give 1/32) and a straight edge
+along a pixel row is off by at most contrast / 256 in each of its pixels.
+Pass k uses the same offset and seed k on both sides:
+
+* the tracer (seed k: its area-light samples);
 * Mitsuba: the deterministic reference (reference/deterministic.py) at the
-  same strata, exact where no light is sampled; with area lights the one-lobe
-  ``whitted`` integrator with its moments over ``MITSUBA_PASSES`` passes;
-* LuxCore: 1024 jittered samples per pixel (``reference.luxcore``), the
-  variance of their mean from their second moment and from the spread of
-  independent passes.
+  tracer's light samples of seed k, so the two agree at float precision,
+  pass by pass;
+* LuxCore: 1024 jittered samples per pixel (``reference.luxcore``).
 
-LuxCore's pixel is the mean of radiance over the pixel's square; the
-others' is the midpoint rule of the same mean over STRATA^2 strata. On
-smooth radiance the two agree to O(1 / STRATA^2); a pixel an edge crosses
-differs by at most about the edge's contrast x 1 / (2 STRATA) (the strata
-centres count whole strata on either side of it), 3 % at STRATA = 16, while
-LuxCore's variance bound there (its per-sample second moment, which counts
-the edge's contrast as noise) is contrast x sqrt(a (1 - a) / 1024) for an
-edge cutting off a fraction a of the pixel: 1.6 % at a = 1 / 2. So edge
-pixels sit within about two of its standard deviations, and the
-deterministic sides need no noise of their own.
+Noise: none on the tracer's and Mitsuba's side where no light is sampled
+(the passes are fixed); with area lights, the spread of their passes (seeds)
+/ PASSES. LuxCore's from its per-sample second moment (an upper bound that
+counts an edge's contrast as noise) and from its passes' spread (region
+sums). Every LuxCore sample is random (jittered), so rule 2 (zero-variance
+pixels) applies wherever its variance vanishes.
 
 Each of the three pairs is judged by the statistical verdict of
-:mod:`reference.compare` (the z-test's rules 1, 3 and 4: per pixel, 4 x 4
+:mod:`reference.compare` (the z-test's rules 1 to 4: per pixel, 4 x 4
 blocks, signed sums over materials, tiles and the image), with both sides'
-noise. The verdict of a scene (:func:`three_way`):
+noise; rule 3's block median, which has no allowance for noise, is shown
+but not judged (:func:`judge_pair`). The verdict of a scene
+(:func:`three_way`):
 
 * all agree: the three pairs pass;
-* X is the odd one out: the two pairs with X fail and the third passes;
-* otherwise no majority (e.g. all three pairs fail, or one pair alone
-  fails: the comparison is not sharp enough to name anyone).
+* X is the odd one out: the two pairs with X fail and the third passes
+  (with the region where X differs most, and by how much);
+* otherwise no majority (all three pairs fail, or one pair alone fails: the
+  comparison is not sharp enough to name anyone).
 
 The tracer-Mitsuba pair is the main comparison of ``whitted compare`` at the
 scene's own size; here it is judged again at the small size, so that the
 three pairs see the same pixels.
-
-Every LuxCore sample is random (jittered), so rule 2 (pixels whose passes all gave
-the same value) applies wherever its variance vanishes. Rule 3's block
-median (no noise allowance) is shown but not judged (:func:`judge_pair`).
 
 Scenes with area lights and mirrors or glass are not compared: LuxCore's
 paths continue from a diffuse surface (to reach the area light by BSDF
@@ -61,16 +68,15 @@ import numpy as np
 
 #: LuxCore's comparisons render at most this many pixels (the scene scaled down).
 PIXELS = 64 * 48
-#: The tracer's seeds pooled where it samples area lights.
-TRACER_SEEDS = 16
-#: Mitsuba's one-lobe passes (STRATA^2 samples per pixel each) where the scene samples
-#: area lights.
-MITSUBA_PASSES = 4
 RENDERERS = ("tracer", "mitsuba", "luxcore")
 
 
 #: Strata per pixel side of the tracer's and Mitsuba's images here.
-STRATA = 16
+STRATA = 8
+#: Renders of the tracer and of Mitsuba, each with its grid shifted (module docstring).
+PASSES = 16
+#: Generator of the offsets' rank-1 lattice (coprime to PASSES).
+LATTICE = 7
 
 
 def luxcore_scene(scene):
@@ -124,29 +130,40 @@ class ThreeWay:
                 "seconds": self.seconds}
 
 
+def shifted(scene, k: int):
+    """The scene with its whole sample grid moved by pass k's offset (module docstring)."""
+    from dataclasses import replace
+
+    u = ((k + 0.5) / PASSES, ((LATTICE * k) % PASSES + 0.5) / PASSES)
+    dx, dy = ((x - 0.5) / scene.film.strata for x in u)
+    return replace(scene, camera=replace(scene.camera, pixel_offset=(dx, dy)))
+
+
+def _passes(name: str, scene, render_one) -> Side:
+    """PASSES renders with shifted grids and seeds 0, 1, ...: their mean and its noise."""
+    start = time.perf_counter()
+    imgs = np.stack([np.asarray(render_one(shifted(scene, k), k), dtype=np.float64)
+                     for k in range(PASSES)])
+    mean = imgs.mean(0)
+    var = pass_var = None
+    if scene.samples_lights():   # seeds differ: random; otherwise the passes are fixed
+        var = imgs.var(0, ddof=1) / PASSES
+        pass_var = imgs.sum(-1).var(0, ddof=1) / PASSES
+    return Side(name, mean.astype(np.float32), var, pass_var,
+                PASSES * scene.film.strata ** 2, time.perf_counter() - start)
+
+
 def tracer_side(scene) -> Side:
-    from reference.compare import tracer_pooled
     from tracer.integrator import Integrator
 
-    start = time.perf_counter()
-    if scene.samples_lights():
-        p = tracer_pooled(scene, seeds=TRACER_SEEDS)
-        return Side("tracer", p.image, p.variance, p.pass_variance, p.seeds,
-                    time.perf_counter() - start)
-    img = Integrator(scene).render().image
-    return Side("tracer", img, None, None, 1, time.perf_counter() - start)
+    return _passes("tracer", scene, lambda s, k: Integrator(s, seed=k).render().image)
 
 
 def mitsuba_side(scene) -> Side:
-    from reference.render import render_reference
+    """Mitsuba: the deterministic reference at the tracer's light samples of each seed."""
+    from reference.deterministic import DeterministicReference
 
-    start = time.perf_counter()
-    if scene.samples_lights():
-        r = render_reference(scene, "whitted", moments=True, passes=MITSUBA_PASSES)
-        return Side("mitsuba", r.image, r.variance, r.pass_variance, r.passes * r.spp,
-                    time.perf_counter() - start, r.random_fraction)
-    r = render_reference(scene, "deterministic")
-    return Side("mitsuba", r.image, None, None, 1, time.perf_counter() - start)
+    return _passes("mitsuba", scene, lambda s, k: DeterministicReference(s, k).render().image)
 
 
 def luxcore_side(result) -> Side:
