@@ -111,7 +111,7 @@ def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: in
 
 def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
                 spp_per_pass: int = SPP_PER_PASS, progress=None,
-                timeout: float | None = None) -> list[LuxResult]:
+                timeout: float | None = None, subsamples: int = SUBSAMPLES) -> list[LuxResult]:
     """Render every scene with LuxCore in one child process; results in the same order.
 
     ``progress(done, total)`` is called per pass. One-line UserError when
@@ -120,7 +120,7 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
     PASS_TIMEOUT per pass).
     """
     require()
-    descs = [describe(s, subsamples=SUBSAMPLES) for s in scenes]  # refuse before starting
+    descs = [describe(s, subsamples=subsamples) for s in scenes]  # refuse before starting
     seeds = [seed * 1000 + k for k in range(passes)]
     total = passes * len(scenes)
     if timeout is None:
@@ -181,6 +181,7 @@ def _result(desc: Description, films: np.ndarray, spp_per_pass: int,
 
 
 def render(scene, passes: int = PASSES, seed: int = 0, spp_per_pass: int = SPP_PER_PASS,
-           progress=None) -> LuxResult:
+           progress=None, subsamples: int = SUBSAMPLES) -> LuxResult:
     """LuxCore's image of one scene (:func:`render_many`)."""
-    return render_many([scene], passes, seed, spp_per_pass, progress)[0]
+    return render_many([scene], passes, seed, spp_per_pass, progress,
+                       subsamples=subsamples)[0]

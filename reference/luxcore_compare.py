@@ -66,8 +66,10 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-#: LuxCore's comparisons render at most this many pixels (the scene scaled down).
+#: LuxCore's comparisons render at most this many pixels (the scene scaled down) ...
 PIXELS = 64 * 48
+#: ... and in a quick report (``whitted report --quick``, CI).
+QUICK_PIXELS = 32 * 24
 RENDERERS = ("tracer", "mitsuba", "luxcore")
 
 
@@ -79,11 +81,12 @@ PASSES = 16
 LATTICE = 7
 
 
-def luxcore_scene(scene):
-    """The scene at most PIXELS pixels large (aspect kept), STRATA^2 samples per pixel."""
+def luxcore_scene(scene, pixels: int = 0):
+    """The scene at most ``pixels`` (PIXELS) large, aspect kept, STRATA^2 samples per pixel."""
+    pixels = pixels or PIXELS
     w, h = scene.film.width, scene.film.height
-    if w * h > PIXELS:
-        k = math.sqrt(PIXELS / (w * h))
+    if w * h > pixels:
+        k = math.sqrt(pixels / (w * h))
         w, h = max(1, int(w * k)), max(1, int(h * k))
     return scene.with_overrides(spp=STRATA * STRATA, size=(w, h))
 
@@ -238,20 +241,35 @@ def _detail(pairs: dict, odd: str, with_odd: list[str]) -> str:
     return "; ".join(parts)
 
 
-def compare_three(scenes: list, progress=None, lux_results: list | None = None) -> list[ThreeWay]:
-    """The three-way verdict of each scene (one LuxCore child process for all of them)."""
+def compare_three(scenes: list, progress=None, quick: bool = False,
+                  main_passed: list | None = None) -> list[ThreeWay]:
+    """The three-way verdict of each scene (one LuxCore child process for all of them).
+
+    ``main_passed``: the verdicts of the main tracer-Mitsuba comparisons (``whitted
+    compare`` at the scenes' own settings), which then stand for that pair; without
+    them the pair is judged here at the small size. ``quick``: QUICK_PIXELS pixels.
+    Scenes that do not convert, or cannot be compared, get the one-line reason.
+    """
     from reference import luxcore
     from reference.compare import comparable, regions_of
+    from reference.luxcore_scene import describe
+    from tracer.errors import UserError
     from tracer.integrator import material_ids
 
-    small = [comparable(luxcore_scene(s)) for s in scenes]
-    why = [not_comparable(s) for s in small]
+    small = [comparable(luxcore_scene(s, QUICK_PIXELS if quick else PIXELS)) for s in scenes]
+    why = []
+    for s in small:
+        reason = not_comparable(s)
+        if reason is None:
+            try:
+                describe(s)
+            except UserError as e:
+                reason = str(e)
+        why.append(reason)
     todo = [s for s, w in zip(small, why, strict=True) if w is None]
-    if lux_results is None:
-        lux_results = luxcore.render_many(todo, progress=progress) if todo else []
-    results = iter(lux_results)
+    results = iter(luxcore.render_many(todo, progress=progress) if todo else [])
     out = []
-    for s, reason in zip(small, why, strict=True):
+    for i, (s, reason) in enumerate(zip(small, why, strict=True)):
         size = (s.film.width, s.film.height)
         if reason is not None:
             out.append(ThreeWay(s.name, size, {}, "not compared", None, reason))
@@ -263,6 +281,10 @@ def compare_three(scenes: list, progress=None, lux_results: list | None = None) 
         pairs = {}
         for a, b in (("tracer", "mitsuba"), ("tracer", "luxcore"), ("mitsuba", "luxcore")):
             pairs[f"{a}-{b}"] = judge_pair(s, sides[a], sides[b], regions)
+        if main_passed is not None:
+            pairs["tracer-mitsuba"]["small_size_passed"] = pairs["tracer-mitsuba"]["passed"]
+            pairs["tracer-mitsuba"]["passed"] = bool(main_passed[i])
+            pairs["tracer-mitsuba"]["from"] = "the main comparison"
         verdict, odd, detail = three_way(pairs)
         out.append(ThreeWay(s.name, size, pairs, verdict, odd, detail,
                             {k: v.seconds for k, v in sides.items()}))

@@ -51,7 +51,6 @@ from __future__ import annotations
 import drjit as dr
 
 from tracer.errors import UserError
-
 from tracer.materials.dielectric import Dielectric
 
 #: the Mitsuba plugins this module registers
