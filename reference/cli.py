@@ -327,6 +327,7 @@ def _compare_luxcore(args, scene, main=None) -> int:
     if not t.compared:
         raise UserError(f"{scene.name}: not compared with LuxCore: {t.detail}")
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
+    outdir.mkdir(parents=True, exist_ok=True)
     write_json(outdir / "luxcore.json", t.to_json())
     print(format_three_way(t))
     print(f"wrote {shown(outdir)}/luxcore.json")
@@ -466,10 +467,11 @@ def cmd_report(args) -> int:
     # The formula-bug sweep needs every scene of the folder: a bug no selected scene
     # reaches would count as missed.
     sweep = not args.no_mutants and args.scenes is None
+    luxcore = _report_luxcore(args)
     report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
                           reference=args.reference,
                           second_opinion=False if args.no_second_opinion else None,
-                          mutants=sweep)
+                          mutants=sweep, luxcore=luxcore)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
           + ("" if args.no_fresnel else
@@ -478,6 +480,27 @@ def cmd_report(args) -> int:
              f", formula bugs {'pass' if report.mutants['pass'] else 'FAIL'}")
           + f"; wrote {out}/index.html, report.md, report.json")
     return EXIT_OK if report.passed else EXIT_FAIL
+
+
+def _report_luxcore(args) -> bool:
+    """Whether the report adds LuxCore's three-way verdicts (a one-line note when it cannot).
+
+    On by default where pyluxcore is installed; ``--no-luxcore`` turns it off. With
+    WHITTED_REQUIRE_LUXCORE=1 (CI) a missing pyluxcore is an error.
+    """
+    import os
+
+    from reference import luxcore
+    from tracer.errors import UserError
+
+    if args.no_luxcore:
+        return False
+    if luxcore.available():
+        return True
+    if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
+        raise UserError(luxcore.INSTALL_HINT + " (WHITTED_REQUIRE_LUXCORE=1)")
+    print(f"note: no LuxCore column: {luxcore.INSTALL_HINT}", flush=True)
+    return False
 
 
 def cmd_mutants(args) -> int:
@@ -919,6 +942,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--no-second-opinion", action="store_true",
                     help="skip the one-lobe z-test beside the deterministic reference on "
                          "scenes with area lights")
+    rp.add_argument("--no-luxcore", action="store_true",
+                    help="skip the LuxCore column (three-way verdicts of tracer, Mitsuba and "
+                         "LuxCore), which is on where the extra whitted[luxcore] is installed")
     rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     rp.set_defaults(func=cmd_report)

@@ -211,8 +211,7 @@ def judge_pair(scene, a: Side, b: Side, regions: dict) -> dict:
     return {"passed": verdict.passed, "checks": checks,
             "metrics": {"mean_rel_diff": metrics.mean_rel_diff,
                         "median_rel": metrics.median_rel, "rmse": metrics.rmse},
-            "worst": worst, "test": ref.name if ref is a else test.name,
-            "reference": ref.name}
+            "worst": worst, "test": test.name, "reference": ref.name}
 
 
 def three_way(pairs: dict) -> tuple[str, str | None, str]:

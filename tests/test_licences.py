@@ -23,11 +23,13 @@ def licence_fields(name: str) -> list[str]:
     return [f for f in fields if f]
 
 
-def runtime_closure() -> dict[str, list[str]]:
-    """Every installed distribution the project's dependencies need (no extras), with
-    its licence fields."""
+def runtime_closure(extra: str | None = None) -> dict[str, list[str]]:
+    """Every installed distribution the project's dependencies need (with ``extra``'s),
+    with its licence fields."""
     project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
     todo = [Requirement(r) for r in project["dependencies"]]
+    if extra:
+        todo += [Requirement(r) for r in project["optional-dependencies"][extra]]
     seen: dict[str, list[str]] = {}
     while todo:
         req = todo.pop()
@@ -59,3 +61,14 @@ def test_no_runtime_dependency_is_gpl_licensed():
     assert "numpy" in closure and "mitsuba" in closure  # the walk found the dependencies
     gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
     assert not gpl, f"GPL-licensed runtime dependencies of a BSD-3-Clause project: {gpl}"
+
+
+def test_the_luxcore_extra_is_not_gpl_licensed():
+    """whitted[luxcore] runs LuxCore in the harness: pyluxcore (Apache-2.0) and its needs."""
+    import pytest
+
+    closure = runtime_closure("luxcore")
+    if not closure.get("pyluxcore"):
+        pytest.skip("pyluxcore is not installed (pip install 'whitted[luxcore]')")
+    gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
+    assert not gpl, f"GPL-licensed dependencies of the luxcore extra: {gpl}"
