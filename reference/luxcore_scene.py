@@ -130,8 +130,14 @@ def _segments(radius: float, size: float, e: float = TESSELLATION) -> int:
 
 
 def sphere_mesh(s: Sphere):
-    """(vertices, faces, normals) of a UV sphere, chords within TESSELLATION x radius."""
-    n = _segments(1.0, 1.0)
+    """(vertices, faces, normals) of a UV sphere, faces within TESSELLATION x radius of it.
+
+    A face of a quad cell of side a = R dphi (the rings use the same step) has a
+    circumradius up to a / sqrt(2), so its deepest point lies a^2 / (4 R) =
+    R dphi^2 / 4 inside: twice the chord depth of one step, hence the steps of
+    a chord depth TESSELLATION / 2.
+    """
+    n = _segments(1.0, 1.0, TESSELLATION / 2)
     rings = max(8, n // 2)
     theta = np.linspace(0, math.pi, rings + 1)
     phi = np.linspace(0, 2 * math.pi, n + 1)
