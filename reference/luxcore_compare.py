@@ -14,11 +14,12 @@ brighter in LuxCore all along it, |Z| = 14 for its tile). So the tracer and
 Mitsuba render ``PASSES`` times with their whole grid of STRATA x STRATA
 strata shifted by an offset within a stratum (:func:`shifted`, the camera's
 ``pixel_offset``). The offsets are a rank-1 lattice, ((k + 1/2) / P,
-((7 k mod P) + 1/2) / P) of a stratum for P = 16: their mean is the
-stratum's centre, and along each axis they take P distinct values, so a
-horizontal or vertical edge is resolved to 1 / (STRATA x P) = 1/128 of a
-pixel (a square grid of 16 offsets would give 1/32) and a straight edge
-along a pixel row is off by at most contrast / 256 in each of its pixels.
+((g k mod P) + 1/2) / P) of a stratum (P = 16, g = 7; a quick report P = 8,
+g = 3): their mean is the stratum's centre, and along each axis they take
+P distinct values, so a horizontal or vertical edge is resolved to
+1 / (STRATA x P) = 1/128 of a pixel (a square grid of 16 offsets would give
+1/32) and a straight edge along a pixel row is off by at most contrast / 256
+in each of its pixels (1/128 in a quick report).
 Pass k uses the same offset and seed k on both sides:
 
 * the tracer (seed k: its area-light samples);
@@ -75,10 +76,13 @@ RENDERERS = ("tracer", "mitsuba", "luxcore")
 
 #: Strata per pixel side of the tracer's and Mitsuba's images here.
 STRATA = 8
-#: Renders of the tracer and of Mitsuba, each with its grid shifted (module docstring).
+#: Renders of the tracer and of Mitsuba, each with its grid shifted (module docstring) ...
 PASSES = 16
-#: Generator of the offsets' rank-1 lattice (coprime to PASSES).
-LATTICE = 7
+#: ... and in a quick report.
+QUICK_PASSES = 8
+#: Generator of the offsets' rank-1 lattice for a number of passes (coprime to it, and not
+#: P - 1, which would put the offsets on one diagonal).
+LATTICE = {16: 7, 8: 3}
 
 
 def luxcore_scene(scene, pixels: int = 0):
@@ -133,40 +137,43 @@ class ThreeWay:
                 "seconds": self.seconds}
 
 
-def shifted(scene, k: int):
+def shifted(scene, k: int, passes: int = 0):
     """The scene with its whole sample grid moved by pass k's offset (module docstring)."""
     from dataclasses import replace
 
-    u = ((k + 0.5) / PASSES, ((LATTICE * k) % PASSES + 0.5) / PASSES)
+    passes = passes or PASSES
+    u = ((k + 0.5) / passes, ((LATTICE[passes] * k) % passes + 0.5) / passes)
     dx, dy = ((x - 0.5) / scene.film.strata for x in u)
     return replace(scene, camera=replace(scene.camera, pixel_offset=(dx, dy)))
 
 
-def _passes(name: str, scene, render_one) -> Side:
-    """PASSES renders with shifted grids and seeds 0, 1, ...: their mean and its noise."""
+def _passes(name: str, scene, render_one, passes: int = 0) -> Side:
+    """Renders with shifted grids and seeds 0, 1, ...: their mean and its noise."""
+    passes = passes or PASSES
     start = time.perf_counter()
-    imgs = np.stack([np.asarray(render_one(shifted(scene, k), k), dtype=np.float64)
-                     for k in range(PASSES)])
+    imgs = np.stack([np.asarray(render_one(shifted(scene, k, passes), k), dtype=np.float64)
+                     for k in range(passes)])
     mean = imgs.mean(0)
     var = pass_var = None
     if scene.samples_lights():   # seeds differ: random; otherwise the passes are fixed
-        var = imgs.var(0, ddof=1) / PASSES
-        pass_var = imgs.sum(-1).var(0, ddof=1) / PASSES
+        var = imgs.var(0, ddof=1) / passes
+        pass_var = imgs.sum(-1).var(0, ddof=1) / passes
     return Side(name, mean.astype(np.float32), var, pass_var,
-                PASSES * scene.film.strata ** 2, time.perf_counter() - start)
+                passes * scene.film.strata ** 2, time.perf_counter() - start)
 
 
-def tracer_side(scene) -> Side:
+def tracer_side(scene, passes: int = 0) -> Side:
     from tracer.integrator import Integrator
 
-    return _passes("tracer", scene, lambda s, k: Integrator(s, seed=k).render().image)
+    return _passes("tracer", scene, lambda s, k: Integrator(s, seed=k).render().image, passes)
 
 
-def mitsuba_side(scene) -> Side:
+def mitsuba_side(scene, passes: int = 0) -> Side:
     """Mitsuba: the deterministic reference at the tracer's light samples of each seed."""
     from reference.deterministic import DeterministicReference
 
-    return _passes("mitsuba", scene, lambda s, k: DeterministicReference(s, k).render().image)
+    return _passes("mitsuba", scene, lambda s, k: DeterministicReference(s, k).render().image,
+                   passes)
 
 
 def luxcore_side(result) -> Side:
@@ -274,7 +281,8 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
             out.append(ThreeWay(s.name, size, {}, "not compared", None, reason))
             continue
         lux = next(results)
-        sides = {"tracer": tracer_side(s), "mitsuba": mitsuba_side(s),
+        passes = QUICK_PASSES if quick else PASSES
+        sides = {"tracer": tracer_side(s, passes), "mitsuba": mitsuba_side(s, passes),
                  "luxcore": luxcore_side(lux)}
         regions = regions_of(material_ids(s), list(s.materials))
         pairs = {}

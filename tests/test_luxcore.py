@@ -12,8 +12,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-
 from conftest import SCENES, run_cli
+
 from tracer import load_scene
 from tracer.errors import UserError
 
