@@ -323,7 +323,8 @@ def _compare_luxcore(args, scene, main=None) -> int:
 
     luxcore.require()
     [t] = compare_three([scene], progress=Progress(f"luxcore {scene.name}"),
-                        main_passed=None if main is None else [main.passed])
+                        main=None if main is None else [{"passed": main.passed,
+                                                         "checks": main.checks}])
     if not t.compared:
         raise UserError(f"{scene.name}: not compared with LuxCore: {t.detail}")
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)

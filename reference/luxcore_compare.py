@@ -35,7 +35,7 @@ counts an edge's contrast as noise) and from its passes' spread (region
 sums). Every LuxCore sample is random (jittered), so rule 2 (zero-variance
 pixels) applies wherever its variance vanishes.
 
-Each of the three pairs is judged by the statistical verdict of
+The two pairs with LuxCore are judged by the statistical verdict of
 :mod:`reference.compare` (the z-test's rules 1 to 4: per pixel, 4 x 4
 blocks, signed sums over materials, tiles and the image), with both sides'
 noise; rule 3's block median, which has no allowance for noise, is shown
@@ -49,8 +49,8 @@ but not judged (:func:`judge_pair`). The verdict of a scene
   comparison is not sharp enough to name anyone).
 
 The tracer-Mitsuba pair is the main comparison of ``whitted compare`` at the
-scene's own size; here it is judged again at the small size, so that the
-three pairs see the same pixels.
+scene's own size and strata (its float-precision limits are set for those;
+the small images here only feed the two LuxCore pairs).
 
 Scenes with area lights and mirrors or glass are not compared: LuxCore's
 paths continue from a diffuse surface (to reach the area light by BSDF
@@ -239,7 +239,10 @@ def _detail(pairs: dict, odd: str, with_odd: list[str]) -> str:
     parts = []
     for k in with_odd:
         other = [r for r in k.split("-") if r != odd][0]
-        w = pairs[k]["worst"] or {}
+        w = pairs[k]["worst"]
+        if w is None:   # the main comparison (tracer-Mitsuba)
+            parts.append(f"against {other}: the main comparison fails")
+            continue
         sign = 1 if pairs[k]["test"] == odd else -1   # the difference as odd - other
         rel = sign * w.get("relative", 0.0)
         parts.append(f"against {other}: largest in {w.get('region', '?')}, "
@@ -248,13 +251,14 @@ def _detail(pairs: dict, odd: str, with_odd: list[str]) -> str:
 
 
 def compare_three(scenes: list, progress=None, quick: bool = False,
-                  main_passed: list | None = None) -> list[ThreeWay]:
+                  main: list | None = None) -> list[ThreeWay]:
     """The three-way verdict of each scene (one LuxCore child process for all of them).
 
-    ``main_passed``: the verdicts of the main tracer-Mitsuba comparisons (``whitted
-    compare`` at the scenes' own settings), which then stand for that pair; without
-    them the pair is judged here at the small size. ``quick``: QUICK_PIXELS pixels.
-    Scenes that do not convert, or cannot be compared, get the one-line reason.
+    ``main``: per scene, the main tracer-Mitsuba comparison (``whitted compare`` at the
+    scene's own settings) as ``{"passed", "checks"}``, which is that pair's verdict;
+    run here (:func:`reference.compare.compare_scene`) where not given. ``quick``:
+    QUICK_PIXELS pixels. Scenes that do not convert, or cannot be compared, get the
+    one-line reason.
     """
     from reference import luxcore
     from reference.compare import comparable, regions_of
@@ -285,13 +289,19 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
         sides = {"tracer": tracer_side(s, passes), "mitsuba": mitsuba_side(s, passes),
                  "luxcore": luxcore_side(lux)}
         regions = regions_of(material_ids(s), list(s.materials))
-        pairs = {}
-        for a, b in (("tracer", "mitsuba"), ("tracer", "luxcore"), ("mitsuba", "luxcore")):
+        if main is not None:
+            m = main[i]
+        else:
+            from reference.compare import compare_scene
+
+            c, _, _ = compare_scene(scenes[i])
+            m = {"passed": c.passed, "checks": c.checks}
+        # the tracer and Mitsuba (the deterministic reference) are judged at their own
+        # strata by the main comparison, whose float-precision limits are set for them
+        pairs = {"tracer-mitsuba": {"passed": bool(m["passed"]), "checks": m["checks"],
+                                    "worst": None, "from": "the main comparison"}}
+        for a, b in (("tracer", "luxcore"), ("mitsuba", "luxcore")):
             pairs[f"{a}-{b}"] = judge_pair(s, sides[a], sides[b], regions)
-        if main_passed is not None:
-            pairs["tracer-mitsuba"]["small_size_passed"] = pairs["tracer-mitsuba"]["passed"]
-            pairs["tracer-mitsuba"]["passed"] = bool(main_passed[i])
-            pairs["tracer-mitsuba"]["from"] = "the main comparison"
         verdict, odd, detail = three_way(pairs)
         out.append(ThreeWay(s.name, size, pairs, verdict, odd, detail,
                             {k: v.seconds for k, v in sides.items()}))

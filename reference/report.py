@@ -178,7 +178,9 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         t0 = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
         log(f"LuxCore: three-way verdicts of {len(sized)} scenes")
-        threes = compare_three(sized, quick=quick, main_passed=[s["pass"] for s in report.scenes])
+        threes = compare_three(sized, quick=quick,
+                               main=[{"passed": s["pass"], "checks": s["checks"]}
+                                     for s in report.scenes])
         for entry, t in zip(report.scenes, threes, strict=True):
             entry["luxcore"] = t.to_json()
             log(f"  {t.scene:<20} {t.verdict}" + (f" ({t.detail})" if t.detail else ""))
