@@ -148,15 +148,22 @@ def shifted(scene, k: int, passes: int = 0):
 
 
 def _passes(name: str, scene, render_one, passes: int = 0) -> Side:
-    """Renders with shifted grids and seeds 0, 1, ...: their mean and its noise."""
+    """Renders with shifted grids and seeds 0, 1, ...: their mean and its noise.
+
+    ``render_one(scene, k)`` returns the image, or (image, variance of its mean from
+    its per-sample second moment), which then bounds rule 1's variance (many degrees
+    of freedom, where the passes' spread has passes - 1).
+    """
     passes = passes or PASSES
     start = time.perf_counter()
-    imgs = np.stack([np.asarray(render_one(shifted(scene, k, passes), k), dtype=np.float64)
-                     for k in range(passes)])
+    outs = [render_one(shifted(scene, k, passes), k) for k in range(passes)]
+    moments = isinstance(outs[0], tuple)
+    imgs = np.stack([np.asarray(o[0] if moments else o, dtype=np.float64) for o in outs])
     mean = imgs.mean(0)
     var = pass_var = None
     if scene.samples_lights():   # seeds differ: random; otherwise the passes are fixed
-        var = imgs.var(0, ddof=1) / passes
+        var = (np.mean([o[1] for o in outs], axis=0) if moments
+               else imgs.var(0, ddof=1)) / passes
         pass_var = imgs.sum(-1).var(0, ddof=1) / passes
     return Side(name, mean.astype(np.float32), var, pass_var,
                 passes * scene.film.strata ** 2, time.perf_counter() - start)
@@ -165,7 +172,13 @@ def _passes(name: str, scene, render_one, passes: int = 0) -> Side:
 def tracer_side(scene, passes: int = 0) -> Side:
     from tracer.integrator import Integrator
 
-    return _passes("tracer", scene, lambda s, k: Integrator(s, seed=k).render().image, passes)
+    def one(s, k):
+        if not s.samples_lights():
+            return Integrator(s, seed=k).render().image
+        r = Integrator(s, seed=k).render(moments=True)
+        return r.image, np.asarray(r.variance, dtype=np.float64)
+
+    return _passes("tracer", scene, one, passes)
 
 
 def mitsuba_side(scene, passes: int = 0) -> Side:
