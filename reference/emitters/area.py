@@ -5,7 +5,10 @@ shape, as the tracer's does; the shape's conversion attaches it.
 
 LuxCore: an emitting mesh, the shape's material with ``emission`` = L,
 ``emission.gain`` = 1 and no power or efficiency: radiance L from the side the
-mesh's face normals point to (:func:`luxcore`, the material's extra keys).
+mesh's faces are wound towards, which the conversion orients along the shape's
+normal (:func:`luxcore`, the material's extra keys; measured on
+tests/data/luxcore/area_diffuse.toml: the lights seen directly and the light
+they shed agree, the regions' sums within |Z| 2.2).
 """
 
 from __future__ import annotations

@@ -1,7 +1,8 @@
 """Conversions of ``directional`` lights (tracer/emitters/directional.py).
 
 LuxCore: ``sharpdistant`` light, light travelling along ``direction``, with
-irradiance gain * color on a surface facing it (measured against the tracer).
+irradiance gain * color on a surface facing it (measured: ortho_transforms and
+glass_sphere, lit by one, agree three ways).
 """
 
 from __future__ import annotations

@@ -39,10 +39,10 @@ reference asks for.
 
 LuxCore (:func:`luxcore`): ``glass`` with ``kr = kt = 1``, ``interiorior`` =
 ``ior`` (behind the normal) and ``exteriorior`` = ``ext_ior``: exact Fresnel
-reflectance R, transmission 1 - R, total internal reflection. Its
-transmitted radiance carries the (n_i / n_t)^2 factor per crossing as the
-tracer's (measured: a camera inside glass seeing a diffuse wall agrees with
-the tracer). Schlick's approximation has no LuxCore equivalent: a declared
+reflectance R, transmission 1 - R, total internal reflection; the
+transmitted radiance is scaled per crossing (measured: glass_sphere,
+tir_prisms, whitted_mix and schlick_diamond agree three ways, and swapping
+the two indices makes LuxCore the odd one out). Schlick's approximation has no LuxCore equivalent: a declared
 ``"schlick"`` is compared exact, as with Mitsuba; an undeclared one is refused.
 """
 
