@@ -191,3 +191,17 @@ def test_cli_reference_and_compare(luxcore, tmp_path):
     r = run_cli("compare", "tir_prisms", "--renderer", "luxcore", "-o", tmp_path / "c")
     assert r.returncode == 0, r.stdout + r.stderr
     assert "all agree" in r.stdout and (tmp_path / "c" / "luxcore.json").exists()
+
+
+def test_report_shows_the_vote_and_keeps_the_tracers_exit_status(luxcore, tmp_path):
+    """LuxCore the odd one out is a finding in the report, not a failure of the tracer."""
+    from reference.report import build_report
+
+    report = build_report(tmp_path, [SCENES / "spot_floor.toml"], quick=True,
+                          log=lambda *_: None, fresnel=False, luxcore=True)
+    (s,) = report.scenes
+    assert s["pass"] and report.passed
+    assert s["luxcore"]["odd"] == "luxcore"
+    md = (tmp_path / "report.md").read_text()
+    assert "## Three renderers" in md and "luxcore is the odd one out" in md
+    assert "luxcore is the odd one out" in (tmp_path / "index.html").read_text()
