@@ -42,8 +42,9 @@ LuxCore (:func:`luxcore`): ``glass`` with ``kr = kt = 1``, ``interiorior`` =
 reflectance R, transmission 1 - R, total internal reflection; the
 transmitted radiance is scaled per crossing (measured: glass_sphere,
 tir_prisms, whitted_mix and schlick_diamond agree three ways, and swapping
-the two indices makes LuxCore the odd one out). Schlick's approximation has no LuxCore equivalent: a declared
-``"schlick"`` is compared exact, as with Mitsuba; an undeclared one is refused.
+the two indices makes LuxCore the odd one out). Schlick's approximation has
+no LuxCore equivalent: a declared ``"schlick"`` is compared exact, as with
+Mitsuba; an undeclared one is refused.
 """
 
 from __future__ import annotations
