@@ -34,8 +34,9 @@ Noise: none on the tracer's and Mitsuba's side where no light is sampled
 moment (many degrees of freedom; Mitsuba's deterministic reference has the
 tracer's light samples and so its noise). LuxCore's from its per-sample
 second moment (an upper bound that counts an edge's contrast as noise) and
-from its passes' spread (region sums). Every LuxCore sample is random (jittered), so rule 2 (zero-variance
-pixels) applies wherever its variance vanishes.
+from its passes' spread (region sums). Every LuxCore sample is random
+(jittered), so rule 2 (zero-variance pixels) applies wherever its variance
+vanishes.
 
 The two pairs with LuxCore are judged by the statistical verdict of
 :mod:`reference.compare` (the z-test's rules 1 to 4: per pixel, 4 x 4
