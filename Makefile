@@ -8,13 +8,14 @@ STAMP  := $(VENV)/.installed-stamp
 
 .PHONY: setup report report-quick test browser lint bench bench-mesh clean
 
-## setup: the virtual environment with whitted and its pinned dependencies, plus Chromium
+## setup: the virtual environment with whitted, its pinned dependencies and the LuxCore
+## extra (whitted[luxcore], the third renderer), plus Chromium
 setup: $(STAMP) browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e '.[test]'
+	$(BIN)/python -m pip install --quiet -e '.[test,luxcore]'
 	@touch $(STAMP)
 
 ## browser: Debian's chromium for the report's browser test, where it is missing

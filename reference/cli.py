@@ -189,6 +189,8 @@ def cmd_reference(args) -> int:
     from tracer.imageio import check_output_path, write_image
 
     out = check_output_path(args.output)
+    if args.renderer == "luxcore":
+        return _reference_luxcore(args, out)
     scene = load(args)
     from tracer.limits import check_render
 
@@ -202,6 +204,32 @@ def cmd_reference(args) -> int:
     write_image(out, result.image)
     print(f"wrote {shown(out)} (Mitsuba, {args.integrator} integrator, {_describe(scene)}, "
           f"{name}) in {result.seconds:.3f} s")
+    return EXIT_OK
+
+
+def _reference_luxcore(args, out) -> int:
+    """``whitted reference --renderer luxcore``: LuxCore's image, spp jittered samples a pixel."""
+    from reference import luxcore
+    from tracer.errors import UserError
+    from tracer.imageio import write_image
+
+    luxcore.require()
+    if args.integrator != "whitted":
+        raise UserError("--integrator: Mitsuba's integrators only; LuxCore renders with its "
+                        "path tracer at Whitted's depths (reference/luxcore_scene.py)")
+    scene = load(args)
+    from reference.luxcore_scene import describe
+
+    describe(scene)  # refuse in one line before the child starts
+    _note_spp(scene)
+    s = scene.film.strata
+    result = luxcore.render(scene, passes=1, seed=args.seed, subsamples=s,
+                            progress=Progress(f"luxcore {scene.name}"))
+    check_finite(result.image, "LuxCore's render")
+    write_image(out, result.image)
+    print(f"wrote {shown(out)} (LuxCore {luxcore.VERSION}, path tracer at Whitted's depths, "
+          f"{scene.film.width}x{scene.film.height}, {s * s} jittered spp, max_depth "
+          f"{scene.film.max_depth}) in {result.seconds:.3f} s")
     return EXIT_OK
 
 
@@ -271,12 +299,57 @@ def format_comparison(c) -> str:
     return "\n".join(lines)
 
 
+def format_three_way(t) -> str:
+    """A scene's three-way verdict (reference.luxcore_compare.ThreeWay) as text."""
+    lines = [f"three renderers at {t.size[0]}x{t.size[1]}: {t.verdict}"
+             + (f" ({t.detail})" if t.detail else "")]
+    for name, p in t.pairs.items():
+        w = p.get("worst") or {}
+        where = (f"; largest region difference {w['region']} {100 * w['relative']:+.3f} % "
+                 f"(|Z| {abs(w['z']):.1f})" if w else "")
+        src = f" ({p['from']})" if p.get("from") else ""
+        lines.append(f"  {name:<16} {'pass' if p['passed'] else 'FAIL'}{src}{where}")
+        lines += ["  " + line for line in _check_lines(
+            {k: v for k, v in p["checks"].items() if v.get("judged", True)})[1:]]
+    return "\n".join(lines)
+
+
+def _compare_luxcore(args, scene, main=None) -> int:
+    """The three-way comparison of ``whitted compare --renderer luxcore|all``."""
+    from reference import luxcore
+    from reference.compare import write_json
+    from reference.luxcore_compare import compare_three
+    from tracer.errors import UserError
+
+    luxcore.require()
+    [t] = compare_three([scene], progress=Progress(f"luxcore {scene.name}"),
+                        main=None if main is None else [{"passed": main.passed,
+                                                         "checks": main.checks}])
+    if not t.compared:
+        raise UserError(f"{scene.name}: not compared with LuxCore: {t.detail}")
+    outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
+    outdir.mkdir(parents=True, exist_ok=True)
+    write_json(outdir / "luxcore.json", t.to_json())
+    print(format_three_way(t))
+    print(f"wrote {shown(outdir)}/luxcore.json")
+    if main is None:   # --renderer luxcore: the tracer against LuxCore
+        return EXIT_OK if t.pairs["tracer-luxcore"]["passed"] else EXIT_FAIL
+    return EXIT_OK if main.passed else EXIT_FAIL
+
+
 def cmd_compare(args) -> int:
     from reference.compare import choose_test, comparable, compare_scene
     from tracer.errors import UserError
     from tracer.limits import check_render
 
+    if args.renderer != "mitsuba":
+        from reference import luxcore
+
+        luxcore.require()   # before anything renders
     scene = load(args)
+    if args.renderer == "luxcore":
+        check_render(scene)
+        return _compare_luxcore(args, scene)
     reference = _reference_option(args)
     if reference == "direct" and choose_test(comparable(scene), "direct") == "z-test":
         given = "--integrator" if args.integrator is not None else "--reference"
@@ -295,6 +368,8 @@ def cmd_compare(args) -> int:
                                  seed=args.seed)
     print(format_comparison(result))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in result.files.values()))
+    if args.renderer == "all":
+        return _compare_luxcore(args, scene, result)
     return EXIT_OK if result.passed else EXIT_FAIL
 
 
@@ -400,10 +475,11 @@ def cmd_report(args) -> int:
     # The formula-bug sweep needs every scene of the folder: a bug no selected scene
     # reaches would count as missed.
     sweep = not args.no_mutants and args.scenes is None
+    luxcore = _report_luxcore(args)
     report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
                           reference=args.reference,
                           second_opinion=False if args.no_second_opinion else None,
-                          mutants=sweep)
+                          mutants=sweep, luxcore=luxcore)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
           + ("" if args.no_fresnel else
@@ -412,6 +488,27 @@ def cmd_report(args) -> int:
              f", formula bugs {'pass' if report.mutants['pass'] else 'FAIL'}")
           + f"; wrote {out}/index.html, report.md, report.json")
     return EXIT_OK if report.passed else EXIT_FAIL
+
+
+def _report_luxcore(args) -> bool:
+    """Whether the report adds LuxCore's three-way verdicts (a one-line note when it cannot).
+
+    On by default where pyluxcore is installed; ``--no-luxcore`` turns it off. With
+    WHITTED_REQUIRE_LUXCORE=1 (CI) a missing pyluxcore is an error.
+    """
+    import os
+
+    from reference import luxcore
+    from tracer.errors import UserError
+
+    if args.no_luxcore:
+        return False
+    if luxcore.available():
+        return True
+    if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
+        raise UserError(luxcore.INSTALL_HINT + " (WHITTED_REQUIRE_LUXCORE=1)")
+    print(f"note: no LuxCore column: {luxcore.INSTALL_HINT}", flush=True)
+    return False
 
 
 def cmd_mutants(args) -> int:
@@ -782,6 +879,10 @@ def build_parser() -> argparse.ArgumentParser:
                           "once per sample; default), direct or path (Mitsuba's), or "
                           "deterministic (the harness's loop over Mitsuba's plugins: both lobes, "
                           "the tracer's light samples of --seed; what compare uses)")
+    ref.add_argument("--renderer", choices=("mitsuba", "luxcore"), default="mitsuba",
+                     help="mitsuba (default) or luxcore: LuxCoreRender's path tracer at "
+                          "Whitted's depths, spp jittered samples per pixel, in a child "
+                          "process (needs the extra: pip install 'whitted[luxcore]')")
     ref.set_defaults(func=cmd_reference)
 
     c = sub.add_parser("compare", help="render with both and compare",
@@ -802,6 +903,12 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--no-second-opinion", action="store_true",
                    help="skip the one-lobe reference's z-test that the deterministic reference "
                         "adds for scenes with area lights")
+    c.add_argument("--renderer", choices=("mitsuba", "luxcore", "all"), default="mitsuba",
+                   help="mitsuba (default): the comparison above; luxcore: the tracer, "
+                        "Mitsuba and LuxCore at a small size, exit status the tracer's "
+                        "against LuxCore; all: both, with the three-way verdict (exit "
+                        "status the tracer's against Mitsuba). LuxCore needs the extra: "
+                        "pip install 'whitted[luxcore]'")
     c.set_defaults(func=cmd_compare)
 
     e = sub.add_parser("export", help="write the scene as Mitsuba 3 XML",
@@ -857,6 +964,9 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--no-second-opinion", action="store_true",
                     help="skip the one-lobe z-test beside the deterministic reference on "
                          "scenes with area lights")
+    rp.add_argument("--no-luxcore", action="store_true",
+                    help="skip the LuxCore column (three-way verdicts of tracer, Mitsuba and "
+                         "LuxCore), which is on where the extra whitted[luxcore] is installed")
     rp.add_argument("--backend", choices=("auto", "llvm", "cuda"), default=None,
                     help="Dr.Jit backend")
     rp.set_defaults(func=cmd_report)

@@ -128,12 +128,20 @@ def quick_overrides(scene):
 
 def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = False,
                  log=print, fresnel: bool = True, reference: str = "deterministic",
-                 second_opinion: bool | None = None, mutants: bool = False) -> Report:
+                 second_opinion: bool | None = None, mutants: bool = False,
+                 luxcore: bool = False) -> Report:
     """Compare every scene, tabulate the Fresnel curves, write the three report files.
 
     ``mutants``: also run the formula-bug sweep of :mod:`reference.mutants` over the
     same scenes (its quick sizes for a quick report, the scenes' own otherwise); the
     report then passes only if every bug is caught.
+
+    ``luxcore``: also the three-way verdict of each scene with LuxCore
+    (:mod:`reference.luxcore_compare`, one LuxCore child process for all scenes).
+    It does not change whether the report passes: that stays the tracer's verdict
+    against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
+    tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
+    LuxCore, shown in the report, not a failure of the tracer.
     """
     from reference.compare import compare_scene
     from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
@@ -164,6 +172,20 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         test = result.test + (" + z-test" if result.second_opinion else "")
         log(f"[{i}/{total}] {scene.name:<20} {test:<22} "
             f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    if luxcore:
+        from reference.luxcore_compare import compare_three
+
+        t0 = time.perf_counter()
+        sized = [quick_overrides(s) if quick else s for s in scenes]
+        log(f"LuxCore: three-way verdicts of {len(sized)} scenes")
+        threes = compare_three(sized, quick=quick,
+                               main=[{"passed": s["pass"], "checks": s["checks"]}
+                                     for s in report.scenes])
+        for entry, t in zip(report.scenes, threes, strict=True):
+            entry["luxcore"] = t.to_json()
+            log(f"  {t.scene:<20} {t.verdict}" + (f" ({t.detail})" if t.detail else ""))
+        log(f"LuxCore: {sum(t.compared for t in threes)} scenes compared "
+            f"({time.perf_counter() - t0:.1f} s)")
     if fresnel:
         t0 = time.perf_counter()
         params = QUICK_FRESNEL if quick else FULL_FRESNEL
@@ -324,6 +346,25 @@ def markdown(report: Report) -> str:
                      f"{'n/a' if flip is None else f'{flip:.4f}'} | {sec['tracer']:.3f} | "
                      f"{sec['mitsuba']:.3f} | {'' if ratio is None else f'{ratio:.2f}'} | "
                      f"{result} |")
+    if any("luxcore" in s for s in report.scenes):
+        lines += ["", "## Three renderers: tracer, Mitsuba, LuxCore", "",
+                  "Each scene small, judged pairwise by the statistical verdict "
+                  "(reference/luxcore_compare.py); the tracer-Mitsuba pair is the main "
+                  "comparison above. The vote does not change the report's result.", "",
+                  "| scene | size | tracer-Mitsuba | tracer-LuxCore | Mitsuba-LuxCore | "
+                  "verdict |", "|---|---|---|---|---|---|"]
+        for s in report.scenes:
+            t = s.get("luxcore")
+            if t is None:
+                continue
+            if not t["pairs"]:
+                lines.append(f"| {s['name']} | | | | | not compared: {t['detail']} |")
+                continue
+            cells = ["pass" if t["pairs"][k]["passed"] else "**FAIL**"
+                     for k in ("tracer-mitsuba", "tracer-luxcore", "mitsuba-luxcore")]
+            verdict = t["verdict"] + (f": {t['detail']}" if t["detail"] else "")
+            lines.append(f"| {s['name']} | {t['size'][0]}x{t['size'][1]} | "
+                         + " | ".join(cells) + f" | {verdict} |")
     if report.fresnel:
         lines += ["", "## Fresnel curves", "",
                   "| ior | side | max abs(exact - mi.fresnel) | / float32 tol. | "
@@ -445,7 +486,9 @@ def html_page(report: Report, outdir: Path) -> str:
         f"{esc(str(m.get('os')))}</td></tr></table>",
         "<h2>Summary</h2><table><tr><th>scene</th><th>reference</th><th>test</th>"
         "<th>median rel.</th><th>99.9th pct. rel.</th><th>result</th>"
-        "<th>tracer s</th><th>Mitsuba s</th><th>Mitsuba / tracer</th></tr>",
+        "<th>tracer s</th><th>Mitsuba s</th><th>Mitsuba / tracer</th>"
+        + ("<th>LuxCore (three-way verdict)</th>"
+           if any("luxcore" in s for s in report.scenes) else "") + "</tr>",
     ]
     for s in report.scenes:
         sec = s["seconds"]
@@ -461,7 +504,8 @@ def html_page(report: Report, outdir: Path) -> str:
                      f"<td>{m['median_rel']:.1e}</td><td>{m.get('p999_rel', 0):.1e}</td>"
                      f"<td>{_verdict(s['pass'])}{extra}</td>"
                      f"<td>{sec['tracer']:.3f}</td><td>{sec['mitsuba']:.3f}</td>"
-                     f"<td>{'' if ratio is None else f'{ratio:.2f}'}</td></tr>")
+                     f"<td>{'' if ratio is None else f'{ratio:.2f}'}</td>"
+                     + _luxcore_cell(s.get("luxcore")) + "</tr>")
     if report.fresnel:
         parts.append(f"<tr><td><a href='#fresnel'>Fresnel curves</a></td><td></td><td>float32 "
                      f"/ binomial CI</td><td></td><td></td><td>{_verdict(report.fresnel_passed)}"
@@ -475,6 +519,18 @@ def html_page(report: Report, outdir: Path) -> str:
         parts.append(_mutants_html(report.mutants))
     parts.append("</body></html>\n")
     return "\n".join(parts)
+
+
+def _luxcore_cell(t: dict | None) -> str:
+    """The summary's LuxCore cell: the three-way verdict, where and by how much."""
+    if t is None:
+        return ""
+    esc = html.escape
+    if not t["pairs"]:
+        return f"<td>not compared: {esc(t['detail'])}</td>"
+    cls = "pass" if t["verdict"] == "all agree" else "expected"
+    detail = f" ({esc(t['detail'])})" if t["detail"] else ""
+    return f"<td><span class='{cls}'>{esc(t['verdict'])}</span>{detail}</td>"
 
 
 def _scene_html(s: dict, report: Report) -> str:

@@ -70,3 +70,12 @@ def test_no_test_dependency_is_gpl_licensed():
     assert "jsonschema" in closure and closure["jsonschema"], closure.get("jsonschema")
     gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
     assert not gpl, f"GPL-licensed test dependencies of a BSD-3-Clause project: {gpl}"
+def test_the_luxcore_extra_is_not_gpl_licensed():
+    """whitted[luxcore] runs LuxCore in the harness: pyluxcore (Apache-2.0) and its needs."""
+    import pytest
+
+    closure = runtime_closure("luxcore")
+    if not closure.get("pyluxcore"):
+        pytest.skip("pyluxcore is not installed (pip install 'whitted[luxcore]')")
+    gpl = {name: f for name, fields in closure.items() for f in fields if COPYLEFT.search(f)}
+    assert not gpl, f"GPL-licensed dependencies of the luxcore extra: {gpl}"

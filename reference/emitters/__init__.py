@@ -2,7 +2,9 @@
 
 ``reference/emitters/<kind>.py`` sits beside ``tracer/emitters/<kind>.py`` and
 holds ``mitsuba(light) -> dict`` (the Mitsuba 3 emitter as a plugin tree,
-:mod:`reference.mitsuba_tree`); :mod:`reference.emitters.area` converts area
+:mod:`reference.mitsuba_tree`) and ``luxcore(light) -> dict`` (LuxCore's light
+properties, :mod:`reference.luxcore_scene`; a kind without one is refused in
+one line, "<kind>: no LuxCore equivalent"); :mod:`reference.emitters.area` converts area
 emitters on shapes. Adding a ``[[lights]]`` kind is one module here and one
 line in :data:`REGISTRY` (``docs/extending.md``).
 """
@@ -41,6 +43,9 @@ def convert(light, renderer: str = "mitsuba"):
     """The light in ``renderer``'s terms; one-line :class:`UserError` if its kind has none."""
     kind = type_of(light)
     fn = getattr(REGISTRY.get(kind), renderer, None)
+    if fn is None and renderer == "luxcore":
+        # the default for kinds without a LuxCore conversion, added later ones included
+        raise UserError(f"{kind}: no LuxCore equivalent (light)")
     if fn is None:
         raise UserError(f"no {renderer} conversion for lights of type = {kind!r}")
     return fn(light)

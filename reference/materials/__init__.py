@@ -9,8 +9,10 @@ and holds
 * optionally ``register(mi)`` and ``PLUGINS``: BSDFs written on Mitsuba's API
   (``whitted_phong``), registered by :func:`reference.mitsuba`.
 
-A second renderer's conversion is one more function per module (e.g.
-``luxcore(material)``), reached through :func:`convert`. Adding a kind is one
+A second renderer's conversion is one more function per module:
+``luxcore(material) -> dict``, LuxCore's material properties
+(:mod:`reference.luxcore_scene`), reached through :func:`convert`; a kind
+without one is refused in one line, "<kind>: no LuxCore equivalent". Adding a kind is one
 module here and one line in :data:`REGISTRY` (``docs/extending.md``).
 """
 
@@ -53,6 +55,12 @@ def convert(material, renderer: str = "mitsuba"):
     kind = type_of(material)
     module = REGISTRY.get(kind)
     fn = getattr(module, renderer, None)
+    if fn is None and renderer == "luxcore":
+        # the default for kinds without a LuxCore conversion, added later ones included
+        raise UserError(f"{kind}: no LuxCore equivalent (material {material.name!r})")
+    if renderer == "luxcore" and material.mask_opacity != 1:
+        raise UserError(f"material {material.name!r}: opacity (a mask) has no LuxCore "
+                        "equivalent here")
     if fn is None:
         raise UserError(f"material {material.name!r}: no {renderer} conversion for "
                         f"type = {kind!r}")

@@ -2,12 +2,16 @@
 
 A two-sided ``conductor`` with ``material = "none"`` (Fresnel reflectance 1)
 and ``specular_reflectance`` the mirror's colour: one delta lobe of weight
-``reflectance``, as in the tracer.
+``reflectance``, as in the tracer (one-sided with ``two_sided = false``).
+
+LuxCore: ``mirror`` with ``kr`` the mirror's colour, the same single delta lobe
+(no Fresnel term), reflecting on both sides; a one-sided mirror is refused.
 """
 
 from __future__ import annotations
 
 from reference.mitsuba_tree import rgb
+from tracer.errors import UserError
 from tracer.materials.mirror import Mirror
 
 
@@ -15,3 +19,9 @@ def mitsuba(m: Mirror) -> dict:
     bsdf = {"type": "conductor", "material": ("string", "none"),
             "specular_reflectance": rgb(m.reflectance)}
     return {"type": "twosided", "material": bsdf} if m.two_sided else bsdf
+
+
+def luxcore(m: Mirror) -> dict:
+    if not m.two_sided:
+        raise UserError(f"material {m.name!r}: a one-sided mirror has no LuxCore equivalent here")
+    return {"type": "mirror", "kr": tuple(m.reflectance)}

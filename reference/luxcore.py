@@ -1,0 +1,187 @@
+"""LuxCoreRender as a third renderer: render a scene in a child process, with its noise.
+
+LuxCore (``pyluxcore`` 2.11.2, the optional extra ``whitted[luxcore]``) is
+the successor of LuxRender, the renderer of the course's later assignments.
+It is independent of both the tracer and Mitsuba, so where those two
+disagree a third image makes it a vote (:mod:`reference.luxcore_compare`).
+
+How it renders (:mod:`reference.luxcore_scene` for the scene):
+
+* ``PATHCPU`` with the ``RANDOM`` sampler, one sample per film pixel per
+  pass, ``passes`` passes with different seeds. ``TILEPATHCPU`` would give
+  exactly N^2 samples and the same image on every run, but it ignores
+  ``renderengine.seed`` (measured: two seeds, the same image to the bit), so
+  its repeats carry no noise estimate. PATHCPU is fast per sample on a large
+  film at one sample per pass and slow at many samples per pixel of a small
+  one (measured at 64 x 48: 0.2 s per sample per pixel, against 0.5 s for a
+  448 x 336 film at one sample), so a pixel's samples are spread over a film
+  ``SUBSAMPLES`` times larger on each side.
+* Pixel = the mean of its SUBSAMPLES^2 sub-pixels (filter ``NONE``): a
+  stratified estimate of the mean of radiance over the pixel's square, which
+  the tracer's and Mitsuba's strata centres approximate by the midpoint rule
+  (:mod:`reference.luxcore_compare` renders them with many strata).
+* Noise, as Mitsuba's pooled reference (reference/compare.py, rules 1 and
+  4): the per-sample second moment over all N = passes x SUBSAMPLES^2
+  samples, (E[x^2] - E[x]^2) / N, an upper bound for the variance of a
+  stratified mean (it includes the variation across the pixel, edges
+  included); and the spread of the passes' means / passes, unbiased, for the
+  region sums.
+
+LuxCore runs in ``python -m reference.luxcore_runner`` under a time limit,
+one child for a list of scenes (:func:`render_many`), so its allocator and
+threads never share a process with Dr.Jit.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from reference.luxcore_scene import Description, config_props, describe, props_text
+from tracer.errors import UserError
+
+#: the pinned version (pyproject's extra)
+VERSION = "2.11.2"
+INSTALL_HINT = ("LuxCore is not installed: pip install 'whitted[luxcore]' "
+                f"(pyluxcore {VERSION}), or `make setup`")
+#: Independent passes per render (their spread has PASSES - 1 degrees of freedom per pixel).
+PASSES = 4
+#: Film sub-pixels per image pixel side: PASSES x SUBSAMPLES^2 = 1024 samples per pixel, as
+#: Mitsuba's pooled sampling reference (reference.compare.ZTEST_SAMPLES).
+SUBSAMPLES = 16
+#: Samples per film pixel per pass.
+SPP_PER_PASS = 1
+#: Seconds a child may run per pass, on top of a fixed start-up allowance.
+PASS_TIMEOUT = 60.0
+STARTUP_TIMEOUT = 60.0
+
+
+def available() -> bool:
+    """Whether pyluxcore is importable (checked without importing it here)."""
+    import importlib.util
+
+    return importlib.util.find_spec("pyluxcore") is not None
+
+
+def require() -> None:
+    """A one-line UserError naming how to install LuxCore when it is missing."""
+    if not available():
+        raise UserError(INSTALL_HINT)
+
+
+@dataclass
+class LuxResult:
+    """LuxCore's image of a scene and the noise of that image."""
+    image: np.ndarray          # H x W x 3 float32: mean of the passes
+    variance: np.ndarray       # H x W x 3: of that mean, from the per-sample second moment
+    pass_variance: np.ndarray | None  # H x W: channel sum, from the passes' spread
+    passes: int
+    samples: int               # samples per pixel over all passes
+    seconds: float
+
+
+def pixels_of(film: np.ndarray, desc: Description) -> np.ndarray:
+    """H x W x k x k x 3: each pixel's sub-pixels (k = desc.subsamples)."""
+    k, h, w = desc.subsamples, desc.height, desc.width
+    return film.reshape(h, k, w, k, 3).transpose(0, 2, 1, 3, 4)
+
+
+def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: int,
+               pass_timeout: float) -> None:
+    arrays = {"props": np.array(desc.text()),
+              "config": np.array(props_text(config_props(desc, 0, spp_per_pass)).replace(
+                  'renderengine.seed = 1\n', "renderengine.seed = @SEED@\n")),
+              "film": np.array(desc.film_size), "seeds": np.array(seeds, dtype=np.int64),
+              "pass_timeout": np.array(pass_timeout),
+              "mesh_names": np.array(list(desc.meshes))}
+    for i, (v, f, n) in enumerate(desc.meshes.values()):
+        arrays[f"v_{i}"] = np.asarray(v, dtype=np.float32)
+        arrays[f"f_{i}"] = np.asarray(f, dtype=np.int64)
+        if n is not None:
+            arrays[f"n_{i}"] = np.asarray(n, dtype=np.float32)
+    np.savez(path, **arrays)
+
+
+def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
+                spp_per_pass: int = SPP_PER_PASS, progress=None,
+                timeout: float | None = None, subsamples: int = SUBSAMPLES) -> list[LuxResult]:
+    """Render every scene with LuxCore in one child process; results in the same order.
+
+    ``progress(done, total)`` is called per pass. One-line UserError when
+    pyluxcore is missing, a scene does not convert, or the child fails or
+    runs past its time limit (``timeout``, default: start-up plus
+    PASS_TIMEOUT per pass).
+    """
+    require()
+    descs = [describe(s, subsamples=subsamples) for s in scenes]  # refuse before starting
+    seeds = [seed * 1000 + k for k in range(passes)]
+    total = passes * len(scenes)
+    if timeout is None:
+        timeout = STARTUP_TIMEOUT + PASS_TIMEOUT * total
+    with tempfile.TemporaryDirectory(prefix="whitted-luxcore-") as tmp:
+        jobs = []
+        for i, d in enumerate(descs):
+            job = Path(tmp) / f"job{i}.npz"
+            _write_job(job, d, seeds, spp_per_pass, PASS_TIMEOUT)
+            jobs.append(job)
+        start = time.perf_counter()
+        done = 0
+        env = dict(os.environ)
+        proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
+                                 *map(str, jobs)], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.PIPE, text=True, env=env,
+                                cwd=str(Path(__file__).resolve().parent.parent))
+        tail: list[str] = []
+        try:
+            for line in proc.stderr:
+                if line.startswith("@pass"):
+                    done += 1
+                    if progress is not None:
+                        progress(done, total)
+                elif line.strip():
+                    tail = (tail + [line.strip()])[-5:]
+                if time.perf_counter() - start > timeout:
+                    raise subprocess.TimeoutExpired(proc.args, timeout)
+            proc.wait(timeout=max(1.0, timeout - (time.perf_counter() - start)))
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+            raise UserError(f"LuxCore ran past its time limit of {timeout:.0f} s") from None
+        seconds = time.perf_counter() - start
+        if proc.returncode != 0:
+            why = next((t for t in reversed(tail) if not t.startswith("[")), None) or (
+                tail[-1] if tail else f"exit status {proc.returncode}")
+            raise UserError(f"LuxCore failed: {why}")
+        results = []
+        for d, job in zip(descs, jobs, strict=True):
+            with np.load(str(job)[:-4] + ".out.npz") as out:
+                films = out["passes"]
+            results.append(_result(d, films, spp_per_pass, seconds / len(descs)))
+    return results
+
+
+def _result(desc: Description, films: np.ndarray, spp_per_pass: int,
+            seconds: float) -> LuxResult:
+    subs = np.stack([pixels_of(f.astype(np.float64), desc) for f in films])  # P H W k k 3
+    p = len(subs)
+    n = p * desc.subsamples ** 2 * spp_per_pass
+    mean = subs.mean(axis=(0, 3, 4))
+    m2 = (subs ** 2).mean(axis=(0, 3, 4))
+    var = np.maximum(m2 - mean ** 2, 0) / n
+    sums = subs.mean(axis=(3, 4)).sum(-1)            # P x H x W: each pass's channel sum
+    pass_var = sums.var(0, ddof=1) / p if p > 1 else None
+    return LuxResult(mean.astype(np.float32), var.astype(np.float32), pass_var, p, n, seconds)
+
+
+def render(scene, passes: int = PASSES, seed: int = 0, spp_per_pass: int = SPP_PER_PASS,
+           progress=None, subsamples: int = SUBSAMPLES) -> LuxResult:
+    """LuxCore's image of one scene (:func:`render_many`)."""
+    return render_many([scene], passes, seed, spp_per_pass, progress,
+                       subsamples=subsamples)[0]

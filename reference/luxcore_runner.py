@@ -1,0 +1,83 @@
+"""LuxCore's side of a comparison, run in a child process: ``python -m reference.luxcore_runner``.
+
+LuxCore's allocator and thread pool never share a process with Dr.Jit:
+:mod:`reference.luxcore` writes each job (the scene description of
+:mod:`reference.luxcore_scene`, its meshes and the passes' seeds) to an
+``.npz`` file and starts this module on the list of jobs; each job's passes
+come back in ``<job>.out.npz`` (``passes``: P x H x W x 3 float32 radiance).
+
+Rules measured on pyluxcore 2.11.2:
+
+* ``numpy`` is imported before ``pyluxcore`` (the other order aborts with
+  "free(): invalid pointer");
+* ``pyluxcore.Init()`` without a Python log callback (one aborts at exit);
+* ``RenderSession.WaitForDone()`` alone never returns: the halt test
+  (``batch.haltspp``) runs inside ``UpdateStats()``, so the session is polled.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+
+import numpy as np  # before pyluxcore, always
+
+
+def _mesh(scene, name: str, v: np.ndarray, f: np.ndarray, n: np.ndarray | None) -> None:
+    scene.DefineMesh(name, [tuple(map(float, p)) for p in np.asarray(v, np.float32)],
+                     [tuple(map(int, t)) for t in f],
+                     None if n is None else [tuple(map(float, p))
+                                             for p in np.asarray(n, np.float32)],
+                     None, None, None)
+
+
+def run_job(pyluxcore, path: str) -> None:
+    job = np.load(path, allow_pickle=False)
+    scene = pyluxcore.Scene()
+    names = [str(x) for x in job["mesh_names"]]
+    for i, name in enumerate(names):
+        n = job[f"n_{i}"] if f"n_{i}" in job.files else None
+        _mesh(scene, name, job[f"v_{i}"], job[f"f_{i}"], n)
+    props = pyluxcore.Properties()
+    props.SetFromString(str(job["props"]))
+    scene.Parse(props)
+    width, height = (int(x) for x in job["film"])
+    seeds = [int(s) for s in job["seeds"]]
+    out = np.zeros((len(seeds), height, width, 3), dtype=np.float32)
+    timeout = float(job["pass_timeout"])
+    for k, seed in enumerate(seeds):
+        cfg = pyluxcore.Properties()
+        cfg.SetFromString(str(job["config"]).replace("@SEED@", str(seed)))
+        session = pyluxcore.RenderSession(pyluxcore.RenderConfig(cfg, scene))
+        start = time.monotonic()
+        session.Start()
+        while True:
+            session.UpdateStats()
+            if session.HasDone():
+                break
+            if time.monotonic() - start > timeout:
+                session.Stop()
+                raise SystemExit(f"LuxCore: a pass took longer than {timeout:g} s")
+            time.sleep(0.005)
+        session.Stop()
+        img = np.zeros((height, width, 3), dtype=np.float32)
+        session.GetFilm().GetOutputFloat(pyluxcore.FilmOutputType.RGB, img)
+        out[k] = img[::-1]   # LuxCore's film rows run bottom to top
+        spp = session.GetStats().Get("stats.renderengine.pass").GetInt()
+        print(f"@pass {k + 1}/{len(seeds)} spp {spp}", file=sys.stderr, flush=True)
+        del session
+    np.savez(path[:-4] + ".out.npz", passes=out)
+
+
+def main(argv: list[str]) -> int:
+    import pyluxcore
+
+    pyluxcore.Init()
+    for path in argv:
+        run_job(pyluxcore, path)
+        print(f"@done {path}", file=sys.stderr, flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))

@@ -1,0 +1,206 @@
+"""LuxCore, the third renderer: the scene conversion, the child process, the three-way vote.
+
+The conversion tests need no LuxCore. The rendering tests need the extra
+``whitted[luxcore]`` (pyluxcore): they are skipped in one line without it,
+except where WHITTED_REQUIRE_LUXCORE=1 (CI, ``make test``), where a missing
+pyluxcore fails them.
+"""
+
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import SCENES, run_cli
+
+from tracer import load_scene
+from tracer.errors import UserError
+
+DATA = Path(__file__).resolve().parent / "data" / "luxcore"
+
+
+@pytest.fixture(scope="module")
+def luxcore():
+    from reference import luxcore as lx
+
+    if not lx.available():
+        if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
+            pytest.fail("pyluxcore is required here (WHITTED_REQUIRE_LUXCORE=1) but missing")
+        pytest.skip("pyluxcore is not installed: pip install 'whitted[luxcore]'")
+    return lx
+
+
+# ------------------------------------------------------------------ conversion
+
+
+def test_point_light_intensity_is_gain_times_colour_over_four_pi():
+    from reference.emitters import convert
+    from tracer.emitters.point import PointLight
+
+    p = convert(PointLight((1, 2, 3), (60, 30, 15)), "luxcore")
+    # LuxCore: I = gain * color / (4 pi) without power and efficiency
+    assert p["power"] == 0 and p["efficiency"] == 0
+    assert np.allclose(np.multiply(p["gain"], p["color"]) / (4 * math.pi), (60, 30, 15))
+
+
+def test_kinds_without_a_luxcore_conversion_refuse_in_one_line(monkeypatch):
+    """The registry's default: any kind without luxcore(), a kind added later included."""
+    import types
+
+    from reference import materials
+    from tracer.materials.phong import Phong
+
+    with pytest.raises(UserError) as e:
+        materials.convert(Phong("shiny"), "luxcore")
+    assert str(e.value).startswith("phong: no LuxCore equivalent") and "\n" not in str(e.value)
+    # a kind registered later with only a Mitsuba conversion
+    monkeypatch.setitem(materials.REGISTRY, "phong", types.SimpleNamespace(mitsuba=lambda m: {}))
+    with pytest.raises(UserError, match="^phong: no LuxCore equivalent"):
+        materials.convert(Phong("shiny"), "luxcore")
+
+
+@pytest.mark.parametrize("name, message", [
+    ("heckbert_minray", "no LuxCore equivalent"),
+    ("whitted_1980", "textured diffuse reflectance has no LuxCore equivalent"),
+    ("phong_lobes", "phong: no LuxCore equivalent"),
+])
+def test_scenes_that_do_not_map_are_refused(name, message):
+    from reference.luxcore_scene import describe
+
+    with pytest.raises(UserError, match=message):
+        describe(load_scene(SCENES / f"{name}.toml"))
+
+
+def test_field_of_view_goes_to_the_longer_side():
+    from reference.luxcore_scene import describe
+
+    scene = load_scene(SCENES / "sphere_point.toml")
+    wide = describe(scene.with_overrides(size=(80, 40))).props
+    tall = describe(scene.with_overrides(size=(40, 80))).props
+    assert wide["scene.camera.fieldofview"] == pytest.approx(scene.camera.fov)
+    # horizontal fov f on a W x H image, H > W: the vertical one is 2 atan(tan(f/2) H / W)
+    t = math.tan(math.radians(scene.camera.fov) / 2)
+    assert tall["scene.camera.fieldofview"] == pytest.approx(math.degrees(2 * math.atan(2 * t)))
+
+
+def test_tessellated_sphere_stays_within_its_chord_bound():
+    from reference.luxcore_scene import TESSELLATION, sphere_mesh
+    from tracer.scene import Sphere
+
+    s = Sphere((1.0, -2.0, 0.5), 0.7, None)
+    v, f, n = sphere_mesh(s)
+    assert np.allclose(np.linalg.norm(v - s.center, axis=1), s.radius)   # vertices on it
+    # the deepest points of the faces: their centroids and their edges' midpoints (the
+    # circumcentre of a right triangle, the cells' halves); 1 % for second-order terms
+    pts = np.concatenate([v[f].mean(1), (v[f[:, 0]] + v[f[:, 1]]) / 2,
+                          (v[f[:, 1]] + v[f[:, 2]]) / 2, (v[f[:, 0]] + v[f[:, 2]]) / 2])
+    depth = s.radius - np.linalg.norm(pts - s.center, axis=1)
+    assert depth.max() <= TESSELLATION * s.radius * 1.01
+    assert depth.max() > TESSELLATION * s.radius / 2   # and not far finer than needed
+    assert np.allclose(np.linalg.norm(n, axis=1), 1)
+
+
+# ------------------------------------------------------------------ rendering
+
+
+def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
+    from reference import cli
+    from reference import luxcore as lx
+
+    monkeypatch.setattr(lx, "available", lambda: False)
+    rc = cli.main(["reference", "sphere_point", "-o", str(tmp_path / "x.exr"),
+                   "--renderer", "luxcore"])
+    err = capsys.readouterr().err.strip()
+    assert rc == 2 and "\n" not in err and "pip install 'whitted[luxcore]'" in err
+
+
+def test_child_past_its_time_limit_is_one_line(luxcore):
+    scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(8, 6))
+    with pytest.raises(UserError, match="time limit of 0 s"):
+        luxcore.render_many([scene], passes=1, timeout=0.1)
+
+
+def test_spot_light_profile_is_pbrt_falloff_over_cos(luxcore):
+    """LuxCore's spot: I falloff(theta) / cos(theta), the finding behind spot_floor.
+
+    An orthographic camera looks straight down on a diffuse floor under the spot
+    (tests/data/luxcore/spot_probe.toml). Inside the beam (theta < 15 degrees)
+    LuxCore / tracer = 1 / cos(theta); between beam and cutoff it follows
+    ((cos theta - cos cutoff) / (cos beam - cos cutoff))^4 / cos theta over the
+    tracer's (and Mitsuba's) linear falloff. A spot converted with the point
+    light's 4 pi gain, or a profile equal to the tracer's, fails.
+    """
+    from tracer.integrator import Integrator
+
+    scene = load_scene(DATA / "spot_probe.toml")
+    lux = luxcore.render(scene, passes=2, subsamples=4)
+    t = Integrator(scene).render().image[..., 0].astype(np.float64)
+    l, var = lux.image[..., 0].astype(np.float64), lux.variance[..., 0]
+    n = scene.film.width
+    xs = (np.arange(n) + 0.5) / n * 6 - 3
+    X, Z = np.meshgrid(xs, xs)
+    theta = np.degrees(np.arctan2(np.hypot(X, Z), 4))
+    inner = (theta < 13) & (t > 0)
+    cos = np.cos(np.radians(theta[inner]))
+    # per pixel: LuxCore's mean over the pixel against the tracer's centre value times
+    # 1 / cos; the pixel's spread of 1 / cos (< 2e-4 at 64 px over 6 units) stays far
+    # below 5 sigma of LuxCore's 16-sample noise, so |z| < 5 with Sidak over ~1000 pixels.
+    z = (l[inner] - t[inner] / cos) / np.sqrt(var[inner] + (2e-4 * l[inner]) ** 2)
+    assert np.abs(z).max() < 5, np.abs(z).max()
+    ratio = l[inner].sum() / t[inner].sum()
+    assert ratio > 1.005   # not the tracer's profile: 1 / cos averages above 1 there
+
+
+def test_three_renderers_agree_on_specular_scenes(luxcore):
+    """Direct light and mirror / glass chains: the tracer, Mitsuba and LuxCore agree.
+
+    Each pair by the statistical verdict (reference/luxcore_compare.py) at the quick
+    sizes, in one LuxCore child; a wrong light gain, a camera one row off or the
+    glass's indices swapped in the conversion makes LuxCore the odd one out.
+    """
+    from reference.luxcore_compare import compare_three
+    from reference.report import quick_overrides
+
+    names = ["glass_sphere", "tir_prisms", "whitted_mix"]
+    threes = compare_three([quick_overrides(load_scene(SCENES / f"{n}.toml")) for n in names],
+                           quick=True)
+    for t in threes:
+        assert t.verdict == "all agree", (t.scene, t.verdict, t.detail, {
+            k: {c: v["value"] for c, v in p["checks"].items()} for k, p in t.pairs.items()})
+
+
+def test_area_lights_with_mirrors_are_not_compared(luxcore):
+    from reference.luxcore_compare import compare_three
+
+    [t] = compare_three([load_scene(SCENES / "area_lights.toml")], quick=True)
+    assert t.verdict == "not compared" and "caustics" in t.detail
+
+
+def test_cli_reference_and_compare(luxcore, tmp_path):
+    out = tmp_path / "lux.exr"
+    r = run_cli("reference", "glass_sphere", "-o", out, "--renderer", "luxcore",
+                "--size", "32x24", "--spp", "4")
+    assert r.returncode == 0, r.stderr
+    assert out.exists() and "LuxCore 2.11.2" in r.stdout
+    r = run_cli("compare", "tir_prisms", "--renderer", "luxcore", "--size", "48x28", "--spp",
+                "4", "-o", tmp_path / "c")
+    assert r.returncode == 0, r.stdout + r.stderr
+    assert "all agree" in r.stdout and (tmp_path / "c" / "luxcore.json").exists()
+
+
+def test_report_shows_the_vote_and_keeps_the_tracers_exit_status(luxcore, tmp_path):
+    """LuxCore the odd one out is a finding in the report, not a failure of the tracer.
+
+    spot_floor: LuxCore's spot profile differs (test above), and the vote names it.
+    """
+    from reference.report import build_report
+
+    report = build_report(tmp_path, [SCENES / "spot_floor.toml"], quick=True,
+                          log=lambda *_: None, fresnel=False, luxcore=True)
+    (s,) = report.scenes
+    assert s["pass"] and report.passed
+    assert s["luxcore"]["odd"] == "luxcore"
+    md = (tmp_path / "report.md").read_text()
+    assert "## Three renderers" in md and "luxcore is the odd one out" in md
+    assert "luxcore is the odd one out" in (tmp_path / "index.html").read_text()
