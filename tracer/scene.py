@@ -315,6 +315,9 @@ class Scene:
     tracer_only: tuple[str, ...] = ()
     #: named groups of shapes for ``instance`` shapes (object space)
     groups: dict[str, tuple] = field(default_factory=dict)
+    #: imported from Mitsuba XML with parts outside the Whitted subset replaced by their
+    #: nearest equivalents (``--approximate``)
+    approximate: bool = False
 
     @property
     def name(self) -> str:
@@ -714,6 +717,24 @@ def load_scene(path: str | Path) -> Scene:
         raise SceneError(path, "", f"tables and arrays nested too deeply to read (more than "
                                    f"{MAX_NESTING} levels are refused anyway)") from None
     return parse_scene(data, path)
+
+
+def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
+    """A TOML scene, or a Mitsuba 3 XML scene (``.xml``) read without Mitsuba.
+
+    XML is mapped onto the scene format by :func:`tracer.mitsuba_xml.read_xml`;
+    ``approximate`` replaces what lies outside the Whitted subset by its nearest
+    equivalent, calling ``warn(line)`` once per kind of substitution.
+    """
+    if str(path).lower().endswith(".xml"):
+        from tracer.mitsuba_xml import read_xml
+
+        imp = read_xml(path, approximate)
+        for line in imp.warnings:
+            if warn is not None:
+                warn(line)
+        return replace(parse_scene(imp.data, str(path)), approximate=imp.approximate)
+    return load_scene(path)
 
 
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:

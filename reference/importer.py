@@ -1,0 +1,309 @@
+"""``whitted import``: a Mitsuba 3 scene (XML, or a ``load_dict`` dictionary) as a TOML scene.
+
+The XML is read by :mod:`tracer.mitsuba_xml` (no Mitsuba needed, so that
+``whitted render scene.xml`` renders it too); this module writes the result as
+TOML, with a comment at every place where something was approximated, mesh
+files referenced (relative to the TOML file where they can be), not copied.
+
+Mitsuba is asked where it knows better than a re-parse: :func:`mitsuba_view`
+loads the original with ``mi.load_file`` and reads the sensor's ``to_world``
+and horizontal field of view and the film's size through ``mi.traverse``, and
+:func:`disagreements` compares them with the imported scene (used by the
+tests and by ``whitted import --verify``). A ``load_dict`` dictionary, such as
+``mi.cornell_box()``, is written as XML first (:func:`dict_to_xml`).
+"""
+
+from __future__ import annotations
+
+import json
+import math
+import os
+from pathlib import Path
+
+import numpy as np
+
+from tracer.mitsuba_xml import Imported, read_xml
+
+# ---------------------------------------------------------------- TOML
+
+
+def _value(v) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, int):
+        return str(v)
+    if isinstance(v, float):
+        if not math.isfinite(v):
+            raise ValueError(f"no TOML for {v}")
+        r = repr(v)
+        return r if ("." in r or "e" in r or "inf" in r) else r + ".0"
+    if isinstance(v, (np.floating, np.integer)):
+        return _value(v.item())
+    if isinstance(v, str):
+        return json.dumps(v, ensure_ascii=False)
+    if isinstance(v, (list, tuple)):
+        return "[" + ", ".join(_value(x) for x in v) + "]"
+    if isinstance(v, dict):
+        return "{ " + ", ".join(f"{_key(k)} = {_value(x)}" for k, x in v.items()) + " }"
+    raise TypeError(f"no TOML for {type(v).__name__}")
+
+
+def _key(k: str) -> str:
+    return k if k.replace("_", "").replace("-", "").isalnum() and k.isascii() else json.dumps(k)
+
+
+def _comments(notes: list[str]) -> list[str]:
+    return [f"# {line}" for n in notes for line in n.splitlines()]
+
+
+def _table(header: str, body: dict, notes: list[str]) -> list[str]:
+    lines = ["", header] + _comments(notes)
+    lines += [f"{_key(k)} = {_value(v)}" for k, v in body.items()]
+    return lines
+
+
+def to_toml(imp: Imported, source: str = "") -> str:
+    """The imported scene as TOML text, its notes as comments above the tables they concern."""
+    d, notes = imp.data, imp.notes
+    lines = [f"# Imported by `whitted import` from {source or 'Mitsuba XML'}."]
+    if imp.approximate:
+        lines.append("# APPROXIMATE: parts outside the Whitted subset were replaced (see the "
+                     "comments marked 'approximated').")
+    lines.append(f"description = {_value(d.get('description', ''))}")
+    lines += _table("[film]", d["film"], notes.get("film", []))
+    lines += _table("[camera]", d["camera"], notes.get("camera", []))
+    for name, m in d.get("materials", {}).items():
+        lines += _table(f"[materials.{_key(name)}]", m, notes.get(f"materials.{name}", []))
+    for i, light in enumerate(d.get("lights", [])):
+        lines += _table("[[lights]]", light, notes.get(f"lights[{i}]", []))
+    for gname, g in d.get("groups", {}).items():
+        for i, s in enumerate(g["shapes"]):
+            lines += _table(f"[[groups.{_key(gname)}.shapes]]", s,
+                            notes.get(f"groups.{gname}.shapes[{i}]", []))
+    for i, s in enumerate(d.get("shapes", [])):
+        lines += _table("[[shapes]]", s, notes.get(f"shapes[{i}]", []))
+    return "\n".join(lines) + "\n"
+
+
+def _relative_files(data: dict, folder: Path) -> None:
+    """Mesh, bitmap and envmap file names relative to the TOML's folder where possible."""
+    def fix(x):
+        if isinstance(x, dict):
+            for k, v in x.items():
+                if k in ("file", "filename") and isinstance(v, str) and os.path.isabs(v):
+                    try:
+                        x[k] = os.path.relpath(v, folder)
+                    except ValueError:  # another drive
+                        pass
+                else:
+                    fix(v)
+        elif isinstance(x, list):
+            for v in x:
+                fix(v)
+    fix(data)
+
+
+def import_scene(source: str | Path, output: str | Path | None = None,
+                 approximate: bool = False, **params) -> tuple[str, Imported]:
+    """(TOML text, the import) of a Mitsuba XML file; file names relative to ``output``."""
+    imp = read_xml(source, approximate, **params)
+    folder = Path(output).resolve().parent if output is not None else Path.cwd()
+    _relative_files(imp.data, folder)
+    return to_toml(imp, Path(source).name), imp
+
+
+# ---------------------------------------------------------------- load_dict -> XML
+
+_TAGS = {"sensor": "sensor", "film": "film", "sampler": "sampler", "rfilter": "rfilter",
+         "integrator": "integrator", "bsdf": "bsdf", "emitter": "emitter"}
+_SHAPES = {"sphere", "rectangle", "disk", "cylinder", "cube", "obj", "ply", "serialized",
+           "shapegroup", "instance"}
+_EMITTERS = {"point", "spot", "directional", "constant", "envmap", "area"}
+_SENSORS = {"perspective", "orthographic", "thinlens"}
+_INTEGRATORS = {"path", "direct", "volpath", "moment", "aov", "ptracer"}
+
+
+def _tag_of(key: str, node: dict) -> str:
+    t = node.get("type")
+    if key in _TAGS:
+        return _TAGS[key]
+    if t in _SHAPES:
+        return "shape"
+    if t in _EMITTERS:
+        return "emitter"
+    if t in _SENSORS:
+        return "sensor"
+    if t in _INTEGRATORS:
+        return "integrator"
+    if t in ("checkerboard", "bitmap"):
+        return "texture"
+    return "bsdf"
+
+
+def _fmt(x) -> str:
+    return f"{float(x):.9g}"
+
+
+def dict_to_xml(tree: dict) -> str:
+    """A ``mi.load_dict`` dictionary (Mitsuba objects as values) as Mitsuba XML text."""
+    from xml.sax.saxutils import quoteattr
+
+    def obj(key, node, indent, name=None) -> list[str]:
+        pad = "    " * indent
+        if node.get("type") == "ref":
+            return [f"{pad}<ref id={quoteattr(node['id'])}/>"]
+        if node.get("type") == "rgb":
+            return [f'{pad}<rgb name={quoteattr(name)} value="'
+                    + ", ".join(_fmt(x) for x in node["value"]) + '"/>']
+        tag = _tag_of(key, node)
+        attrs = f' type={quoteattr(node["type"])}'
+        if name is None and key not in _TAGS and indent == 1:
+            attrs += f" id={quoteattr(key)}"
+        if name is not None and tag == "texture":
+            attrs += f" name={quoteattr(name)}"
+        lines = [f"{pad}<{tag}{attrs}>"]
+        for k, v in node.items():
+            if k in ("type", "id"):
+                continue
+            lines += prop(k, v, indent + 1)
+        return lines + [f"{pad}</{tag}>"]
+
+    def prop(k, v, indent) -> list[str]:
+        pad = "    " * indent
+        if isinstance(v, dict):
+            child_name = None if k in _TAGS or v.get("type") == "ref" else k
+            if v.get("type") in _SHAPES | _EMITTERS or k in _TAGS:
+                child_name = None
+            return obj(k, v, indent, child_name)
+        if isinstance(v, bool):
+            return [f'{pad}<boolean name="{k}" value="{"true" if v else "false"}"/>']
+        if isinstance(v, int):
+            return [f'{pad}<integer name="{k}" value="{v}"/>']
+        if isinstance(v, float):
+            return [f'{pad}<float name="{k}" value="{_fmt(v)}"/>']
+        if isinstance(v, str):
+            return [f"{pad}<string name={quoteattr(k)} value={quoteattr(v)}/>"]
+        if hasattr(v, "matrix"):  # a ScalarTransform4f
+            m = np.asarray(v.matrix, dtype=np.float64).reshape(4, 4)
+            return [f'{pad}<transform name="{k}">',
+                    f'{pad}    <matrix value="' + " ".join(_fmt(x) for x in m.ravel()) + '"/>',
+                    f"{pad}</transform>"]
+        seq = list(v)
+        if len(seq) == 3:
+            return [f'{pad}<point name="{k}" value="' + ", ".join(_fmt(x) for x in seq) + '"/>']
+        raise TypeError(f"no XML for {k} = {v!r}")
+
+    lines = ['<?xml version="1.0" encoding="utf-8"?>', '<scene version="3.0.0">']
+    for k, v in tree.items():
+        if k == "type":
+            continue
+        lines += obj(k, v, 1)
+    return "\n".join(lines + ["</scene>", ""])
+
+
+# ---------------------------------------------------------------- asking Mitsuba
+
+
+def mitsuba_view(path: str | Path, **params) -> dict:
+    """What Mitsuba itself makes of the file's sensor: to_world, horizontal fov, film size."""
+    from reference import mitsuba
+
+    mi = mitsuba()
+    scene = mi.load_file(str(path), **params)
+    sensor = scene.sensors()[0]
+    p = mi.traverse(sensor)
+    out = {"to_world": np.asarray(p["to_world"].matrix, dtype=np.float64).reshape(4, 4),
+           "size": tuple(int(x) for x in p["film.size"]),
+           "type": sensor.class_().name()}
+    if "x_fov" in p.keys():
+        out["x_fov"] = float(np.asarray(p["x_fov"]).ravel()[0])
+    return out
+
+
+def disagreements(scene, view: dict, tol: float = 1e-4) -> list[str]:
+    """Where the imported scene's camera and film differ from what Mitsuba loaded."""
+    out = []
+    f = scene.film
+    if (f.width, f.height) != view["size"]:
+        out.append(f"film {f.width}x{f.height}, Mitsuba's {view['size']}")
+    cam = scene.camera
+    mine = cam.to_world()
+    theirs = view["to_world"]
+    if cam.type == "orthographic" and cam.matrix is None:  # look_at x scale(width / 2)
+        from tracer import transform as tf
+
+        mine = mine @ tf.scale([cam.width / 2, cam.width / 2, 1])
+    scale = max(1.0, float(np.abs(theirs).max()))
+    if not np.allclose(mine, theirs, atol=tol * scale):
+        out.append(f"camera to_world {mine.tolist()}, Mitsuba's {theirs.tolist()}")
+    if "x_fov" in view and cam.type == "perspective":
+        fx = cam.fov_x(f.width / f.height)
+        if abs(fx - view["x_fov"]) > 1e-3:
+            out.append(f"horizontal fov {fx:.5f}, Mitsuba's {view['x_fov']:.5f}")
+    return out
+
+
+# ---------------------------------------------------------------- validation
+
+
+def render_original(source, integrator: str = "path", spp: int = 64, passes: int = 8,
+                    size: tuple[int, int] | None = None):
+    """Mitsuba's render of the *original* scene (XML path or load_dict dictionary).
+
+    ``integrator``: "direct", or "path" at max_depth 2 (direct light, as Whitted's
+    tracer at max_depth 2 computes it). ``passes`` independent renders of ``spp``
+    samples (seeds 0 .. passes-1): (mean image, variance of that mean from the
+    passes' spread), both H x W x 3 float64.
+    """
+    from reference import mitsuba
+
+    mi = mitsuba()
+    scene = (mi.load_dict(source) if isinstance(source, dict)
+             else mi.load_file(str(source)))
+    integ = mi.load_dict({"type": "direct"} if integrator == "direct" else
+                         {"type": "path", "max_depth": 2})
+    imgs = np.stack([np.asarray(mi.render(scene, integrator=integ, spp=spp, seed=k),
+                                dtype=np.float64)[..., :3] for k in range(passes)])
+    return imgs.mean(axis=0), imgs.var(axis=0, ddof=1) / passes
+
+
+def render_imported(scene, seeds: int = 8):
+    """The tracer's render of an imported scene: (mean over seeds, variance of that mean).
+
+    A scene without randomness (strata centres, no sampled light) is rendered once,
+    with zero variance."""
+    from tracer.integrator import Integrator
+
+    random = scene.film.jitter or scene.samples_lights()
+    n = seeds if random else 1
+    imgs = np.stack([Integrator(scene, seed=k).render().image.astype(np.float64)
+                     for k in range(n)])
+    var = imgs.var(axis=0, ddof=1) / n if n > 1 else np.zeros_like(imgs[0])
+    return imgs.mean(axis=0), var
+
+
+def agreement(test, test_var, ref, ref_var) -> dict:
+    """Does the tracer agree with Mitsuba within the noise of both?
+
+    Per pixel and channel, the two-sided z-test of :func:`reference.compare.z_test`
+    (Sidak-corrected over the pixels, the family-wise level of the project's
+    statistical verdict); over the whole image, the difference of the two image
+    means against its standard error (the sum of the per-pixel variances, pixels
+    being independent), which sees a bias too small for any one pixel.
+    """
+    from reference.compare import z_test
+
+    zt = z_test(test.astype(np.float32), ref.astype(np.float32), ref_var, test_var)
+    n = test.size
+    diff = float(test.mean() - ref.mean())
+    se = math.sqrt(float((ref_var + test_var).sum())) / n
+    z_mean = diff / se if se > 0 else (0.0 if diff == 0 else math.inf)
+    rel = diff / float(ref.mean()) if ref.mean() else 0.0
+    return {"z_fraction_passed": zt.fraction_passed, "z_passed": zt.passed,
+            "mean_z": z_mean, "mean_rel_diff": rel,
+            "passed": bool(zt.passed and abs(z_mean) < MEAN_Z_LIMIT)}
+
+
+#: |z| of the image means' difference beyond which the means disagree: 4 sigma, a false
+#: alarm with probability 6e-5 per comparison for a normal statistic.
+MEAN_Z_LIMIT = 4.0
