@@ -213,8 +213,7 @@ def mitsuba_view(path: str | Path, **params) -> dict:
     sensor = scene.sensors()[0]
     p = mi.traverse(sensor)
     out = {"to_world": np.asarray(p["to_world"].matrix, dtype=np.float64).reshape(4, 4),
-           "size": tuple(int(x) for x in p["film.size"]),
-           "type": sensor.class_().name()}
+           "size": tuple(int(x) for x in p["film.size"])}
     if "x_fov" in p.keys():
         out["x_fov"] = float(np.asarray(p["x_fov"]).ravel()[0])
     return out

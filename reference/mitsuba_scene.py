@@ -401,6 +401,22 @@ def _write_obj(path: Path, node: dict) -> None:
     path.write_text("".join(lines))
 
 
+def _relative_mesh_files(tree: dict, folder: Path) -> None:
+    """Mesh files named relative to the XML's folder, where Mitsuba looks for them."""
+    import os
+
+    for v in tree.values():
+        if isinstance(v, dict):
+            if v.get("type") in ("obj", "ply") and "filename" in v:
+                name = os.path.abspath(v["filename"][1])
+                try:
+                    name = os.path.relpath(name, folder)
+                except ValueError:  # another drive: keep it absolute
+                    pass
+                v["filename"] = ("string", name)
+            _relative_mesh_files(v, folder)
+
+
 def _comment(text: str) -> str:
     """Text safe inside an XML comment (no "--", printable)."""
     from tracer.errors import one_line
@@ -422,6 +438,7 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
     path = Path(path)
     mesh_prefix = path.stem + "_"
     tree = scene_tree(scene, integrator, jitter=jitter)
+    _relative_mesh_files(tree, path.resolve().parent)
     meshes: list[dict] = []
     body = []
     for key, value in tree.items():
@@ -438,7 +455,8 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
                if any(f'type="{name}"' in line for line in body)]
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
             "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
-            "--integrator direct for a stock integrator.") if integrator == "whitted" else ""
+            "the integrator option set to direct for a stock integrator (an XML comment may not "
+            "hold two dashes in a row).") if integrator == "whitted" else ""
     if plugins:
         note += (" It uses plugins written on Mitsuba's API (" +
                  ", ".join(f"`{name}`" for name in plugins) + "), registered by "

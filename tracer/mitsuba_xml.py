@@ -266,18 +266,6 @@ def transform_matrix(node: Node) -> np.ndarray:
     return tf.compose(steps)
 
 
-def _hex_rgb(node: Node, text: str) -> list[float]:
-    h = text.strip()[1:]
-    if len(h) != 6:
-        raise XMLImportError(f"{node.where()}: expected #rrggbb, got {text!r}")
-    # Mitsuba reads #rrggbb as sRGB-encoded bytes and linearises them.
-    out = []
-    for i in range(3):
-        c = int(h[2 * i:2 * i + 2], 16) / 255
-        out.append(c / 12.92 if c <= 0.04045 else ((c + 0.055) / 1.055) ** 2.4)
-    return out
-
-
 # ---------------------------------------------------------------- the importer
 
 
@@ -359,10 +347,7 @@ class _Importer:
             return default
         node = self.res.deref(node)
         if node.tag == "rgb":
-            v = node.attrs.get("value", "")
-            if v.strip().startswith("#"):
-                return _hex_rgb(node, v)
-            vals = _floats(node, v)
+            vals = _floats(node, node.attrs.get("value", ""))
             return vals * 3 if len(vals) == 1 else _check_len(node, vals, 3)
         if node.tag in ("float", "integer"):
             return [float(node.attrs.get("value"))] * 3
@@ -675,6 +660,12 @@ class _Importer:
             if spec != [1.0] * 3:
                 out["specular_reflectance"] = spec
             return self._sided(out, two_sided)
+        if kind == "whitted_phong":  # the tracer's own Phong model, as `whitted export` writes it
+            out = {"type": "phong", "diffuse": self.color(p.get("diffuse"), where, [0.5] * 3),
+                   "specular": self.color(p.get("specular"), where, [0.2] * 3),
+                   "exponent": float(self.number(p.get("exponent"), 32.0)),
+                   "model": self.string(p.get("model"), "phong")}
+            return self._sided(out, two_sided)
         if kind == "plastic":
             out = {"type": "plastic",
                    "diffuse_reflectance": self.color(p.get("diffuse_reflectance"), where,
@@ -737,6 +728,9 @@ class _Importer:
                 light["scale"] = float(self.number(p["scale"]))
             if "to_world" in p:
                 light["to_world"] = self.to_world(p["to_world"])
+        elif kind == "whitted_background":  # the tracer's background, as `whitted export` writes it
+            light = {"type": "background",
+                     "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
         elif kind == "area":
             raise XMLImportError(f"{node.where()}: an area emitter belongs inside a <shape>")
         else:
@@ -788,6 +782,9 @@ class _Importer:
             shape["type"] = "mesh"
             shape["file"] = str(self.res.find(node, self.string(p.get("filename"))))
             shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+            triangle = _single_triangle(Path(shape["file"]))
+            if triangle is not None and not shape["smooth"]:  # one flat face: a triangle
+                shape = {"type": "triangle", "vertices": triangle}
             if self.boolean(p.get("flip_normals"), False):
                 self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
         else:
@@ -823,6 +820,21 @@ class _Importer:
             self.note("materials.default", "Mitsuba's default BSDF of a shape without one "
                                            "(a one-sided diffuse of reflectance 0.5)")
         return "default"
+
+
+def _single_triangle(path: Path) -> list | None:
+    """The three vertices of a mesh file with exactly one triangle (else None)."""
+    from tracer.meshio import MeshError, load_mesh
+
+    try:
+        if path.stat().st_size > 4096:  # a one-face mesh is a few lines
+            return None
+        data = load_mesh(path)
+    except (MeshError, OSError):
+        return None
+    if len(data.faces) != 1:
+        return None
+    return [[float(x) for x in data.vertices[i]] for i in data.faces[0]]
 
 
 def read_xml(path: str | Path, approximate: bool = False, **params) -> Imported:
