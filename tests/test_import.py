@@ -133,7 +133,9 @@ SCENE = """<scene version="3.0.0">
       <rotate y="1" angle="30"/>
       <translate value="1, 0, 0"/>
     </transform>
-    <bsdf type="twosided"><bsdf type="diffuse"><rgb name="reflectance" value="1 0.5, 0"/></bsdf></bsdf>
+    <bsdf type="twosided">
+      <bsdf type="diffuse"><rgb name="reflectance" value="1 0.5, 0"/></bsdf>
+    </bsdf>
   </shape>
 </scene>
 """
