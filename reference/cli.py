@@ -435,9 +435,11 @@ def cmd_report(args) -> int:
     report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
                           reference=args.reference,
                           second_opinion=False if args.no_second_opinion else None,
-                          mutants=sweep)
+                          mutants=sweep, imported=not args.no_imported and args.scenes is None)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
+          + ("" if not report.imported else
+             f", imported {sum(r['passed'] for r in report.imported)}/{len(report.imported)}")
           + ("" if args.no_fresnel else
              f", Fresnel curves {'pass' if report.fresnel_passed else 'FAIL'}")
           + ("" if report.mutants is None else
@@ -890,6 +892,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--no-mutants", action="store_true",
                     help="skip the formula-bug sweep (whitted mutants), which otherwise runs "
                          "over the same scenes unless --scenes picks some of them")
+    rp.add_argument("--no-imported", action="store_true",
+                    help="skip the imported group: Mitsuba scenes (its data repository's, "
+                         "mi.cornell_box()) imported and compared with Mitsuba's render of "
+                         "the originals; it runs unless --scenes picks scenes")
     rp.add_argument("--reference", choices=("deterministic", "onelobe"), default="deterministic",
                     help="Mitsuba's side of every scene (see whitted compare --help; default "
                          "deterministic)")
