@@ -293,6 +293,11 @@ def cmd_compare(args) -> int:
     check_render(scene)
     check_render(scene, moments=True, mitsuba=True)
     _note_spp(scene)
+    if scene.film.filter != "box" or scene.film.jitter:
+        print("note: compare judges both sides at the strata centres with the box filter "
+              f"(the scene's {scene.film.filter} filter"
+              f"{' and jitter' if scene.film.jitter else ''} weigh and place the same "
+              "samples alike on both sides)", flush=True)
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
     _backend(args)
     result, _, _ = compare_scene(scene, outdir, reference,
