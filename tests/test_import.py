@@ -315,6 +315,26 @@ def test_jitter_moves_samples_within_their_strata():
     assert abs(float(a.mean() - centres.mean())) < 0.01 * float(centres.mean())
 
 
+def test_jitter_positions_are_uniform_in_their_stratum():
+    """Chi-square of the jittered positions over a 10 x 10 grid of the unit square.
+
+    100 cells, 102,400 points: 1024 expected per cell. With 99 degrees of freedom the
+    statistic exceeds 160 with probability about 1e-4; a constant offset (no jitter)
+    or one coordinate copied into the other puts all points in 1 or 10 cells."""
+    import drjit as dr
+
+    from tracer.backend import jit
+    from tracer.sampling import jitter_2d
+
+    idx = dr.arange(jit.UInt32, 102_400)
+    u = jitter_2d(idx // 16, idx % 16, seed=3)
+    x, y = u.x.numpy(), u.y.numpy()
+    assert (x >= 0).all() and (x < 1).all() and (y >= 0).all() and (y < 1).all()
+    counts, _, _ = np.histogram2d(x, y, bins=10, range=[[0, 1], [0, 1]])
+    chi2 = float(((counts - 1024) ** 2 / 1024).sum())
+    assert chi2 < 160, chi2
+
+
 # ---------------------------------------------------------------- Mitsuba's own scenes
 
 
@@ -322,9 +342,9 @@ def _validate(source, xml_path, integrator: str, spp: int, passes: int,
               one_sided_matters: bool = False, size=None):
     imp = read_xml(xml_path)
     scene = _scene(imp.data, xml_path, one_sided_matters).with_overrides(max_depth=2, spp=spp)
-    ref, ref_var = render_original(source, integrator, spp=spp, passes=passes)
-    test, test_var = render_imported(scene, seeds=passes)
-    return agreement(test, test_var, ref, ref_var)
+    _, ref_y, ref_var = render_original(source, integrator, spp=spp, passes=passes)
+    _, test_y, test_var = render_imported(scene, seeds=passes)
+    return agreement(test_y, test_var, ref_y, ref_var)
 
 
 def test_floating_sphere_agrees_with_mitsubas_render(mi):
@@ -345,12 +365,12 @@ def test_cornell_box_agrees_with_mitsubas_render(mi, tmp_path):
     assert result["passed"], result
 
 
-@pytest.mark.slow
 def test_instancing_agrees_with_mitsubas_render(mi):
-    """instancing/test_instancing_path.xml: shapegroups and instances; a one-sided
-    rectangle is seen from behind, so the import needs one-sided BSDFs."""
-    result = _validate(INSTANCING, INSTANCING, "path", spp=64, passes=4,
-                       one_sided_matters=True)
+    """instancing/test_instancing_path.xml: a shapegroup (mesh sphere, analytic sphere,
+    rectangle) in three instances, a point light at the eye, Mitsuba's `path` at
+    max_depth 2. No back face is lit: Mitsuba renders it alike with the rectangle's
+    BSDF wrapped in `twosided` (checked when the test was written)."""
+    result = _validate(INSTANCING, INSTANCING, "path", spp=16, passes=4)
     assert result["passed"], result
 
 
