@@ -356,7 +356,7 @@ def cmd_import(args) -> int:
         print(f"warning: {line}", flush=True)
     out.write_text(text)
     try:  # what render would refuse, said now
-        scene = parse_scene(imp.data, str(args.xml))
+        scene = parse_scene(imp.data, str(out))
     except UserError as e:
         raise UserError(f"wrote {shown(out)}, but the tracer cannot load it: {e}") from None
     if args.verify:
@@ -366,7 +366,7 @@ def cmd_import(args) -> int:
                             "loading: " + "; ".join(problems))
     n = sum(len(v) for v in imp.notes.values())
     print(f"wrote {shown(out)} ({len(scene.shapes)} shapes, {len(scene.lights)} lights; "
-          f"{n} approximation notes as comments" + (", APPROXIMATE" if imp.approximate else "")
+          f"{n} notes as comments" + (", APPROXIMATE" if imp.approximate else "")
           + (", camera and film verified against Mitsuba" if args.verify else "") + ")")
     return EXIT_OK
 

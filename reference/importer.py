@@ -107,10 +107,42 @@ def _relative_files(data: dict, folder: Path) -> None:
 def import_scene(source: str | Path, output: str | Path | None = None,
                  approximate: bool = False, **params) -> tuple[str, Imported]:
     """(TOML text, the import) of a Mitsuba XML file; file names relative to ``output``."""
-    imp = read_xml(source, approximate, **params)
     folder = Path(output).resolve().parent if output is not None else Path.cwd()
+    stem = Path(output).stem if output is not None else Path(source).stem
+    imp = read_xml(source, approximate, convert=_serialized_converter(folder, stem), **params)
     _relative_files(imp.data, folder)
     return to_toml(imp, Path(source).name), imp
+
+
+def _serialized_converter(folder: Path, stem: str):
+    """``convert(file, index)``: a Mitsuba ``serialized`` mesh written as OBJ by Mitsuba.
+
+    Mitsuba reads the file (its compressed format); its vertex positions, normals,
+    texture coordinates and faces, read through ``mi.traverse``, are written to
+    ``meshes/STEM_NAME_INDEX.obj`` beside the TOML."""
+    def convert(source: Path, index: int) -> Path:
+        from reference import mitsuba
+        from reference.mitsuba_scene import _write_obj
+
+        mi = mitsuba()
+        mesh = mi.load_dict({"type": "serialized", "filename": str(source),
+                             "shape_index": index})
+        p = mi.traverse(mesh)
+
+        def arr(key, n):
+            if key not in p.keys():
+                return None
+            a = np.asarray(p[key], dtype=np.float64)
+            return a.reshape(-1, n) if a.size else None
+
+        node = {"vertices": arr("vertex_positions", 3),
+                "faces": np.asarray(p["faces"], dtype=np.int64).reshape(-1, 3),
+                "normals": arr("vertex_normals", 3), "uvs": arr("vertex_texcoords", 2)}
+        out = folder / "meshes" / f"{stem}_{source.stem}_{index}.obj"
+        out.parent.mkdir(parents=True, exist_ok=True)
+        _write_obj(out, node)
+        return out
+    return convert
 
 
 # ---------------------------------------------------------------- load_dict -> XML
@@ -350,6 +382,8 @@ def imported_cases(quick: bool) -> list[ImportedCase]:
     return [
         ImportedCase("floating_sphere", "direct", 32, 4,
                      xml=MITSUBA_DATA / "floating_sphere" / "test_directional_direct.xml"),
+        ImportedCase("instancing", "path", 16 if quick else 64, 4,
+                     xml=MITSUBA_DATA / "instancing" / "test_instancing_path.xml"),
         ImportedCase("cornell_box", "path", 16 if quick else 64, 8, 64 if quick else 128),
     ]
 

@@ -284,7 +284,8 @@ APPROXIMATIONS = {
 
 
 class _Importer:
-    def __init__(self, path: Path, approximate: bool, params: dict):
+    def __init__(self, path: Path, approximate: bool, params: dict, convert=None):
+        self.convert = convert
         self.path = path
         self.approximate = approximate
         self.res = _Resolver(path, params)
@@ -787,6 +788,16 @@ class _Importer:
                 shape = {"type": "triangle", "vertices": triangle}
             if self.boolean(p.get("flip_normals"), False):
                 self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
+        elif kind == "serialized" and self.convert is not None:
+            source = self.res.find(node, self.string(p.get("filename")))
+            shape["type"] = "mesh"
+            shape["file"] = str(self.convert(source, int(self.number(p.get("shape_index"), 0))))
+            shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+            self.note(where, f"serialized mesh {source.name} converted by Mitsuba to "
+                             f"{Path(shape['file']).name}")
+        elif kind == "serialized":
+            self.outside(node, "a serialized mesh (`whitted import` converts it through "
+                               "Mitsuba; render the imported TOML)", None, where)
         else:
             self.outside(node, f'shape "{kind}"', None, where)
         if "flip_normals" in p and kind != "obj" and kind != "ply" and \
@@ -837,13 +848,17 @@ def _single_triangle(path: Path) -> list | None:
     return [[float(x) for x in data.vertices[i]] for i in data.faces[0]]
 
 
-def read_xml(path: str | Path, approximate: bool = False, **params) -> Imported:
+def read_xml(path: str | Path, approximate: bool = False, convert=None,
+             **params) -> Imported:
     """A Mitsuba 3 XML scene as a scene-format document (see the module's docstring).
 
     ``params``: values for the file's ``$name`` parameters (they override its
-    ``<default>``s), as ``mi.load_file(path, name=value)`` takes them.
+    ``<default>``s), as ``mi.load_file(path, name=value)`` takes them. ``convert``:
+    ``convert(serialized_file, shape_index) -> mesh file`` for Mitsuba's
+    ``serialized`` meshes (the importer's, through Mitsuba); without it they are
+    refused.
     """
     try:
-        return _Importer(Path(path), approximate, params).run()
+        return _Importer(Path(path), approximate, params, convert).run()
     except RecursionError:
         raise XMLImportError(f"{path}: elements nested too deeply") from None
