@@ -164,9 +164,12 @@ class _Resolver:
                 out += self._include(child)
                 continue
             child.children = self.expand(child)
-            if "id" in child.attrs and child.tag not in ("ref",):
+            if "id" in child.attrs and child.tag not in ("ref", "alias"):
                 self.ids[child.attrs["id"]] = child
             if child.tag == "alias":
+                if child.attrs.get("id") not in self.ids or "as" not in child.attrs:
+                    raise XMLImportError(f"{child.where()}: expected id (of an object "
+                                         "declared above) and as")
                 self.ids[child.attrs["as"]] = self.ids[child.attrs["id"]]
                 continue
             out.append(child)
@@ -519,6 +522,8 @@ class _Importer:
             cam["origin"] = _floats(la, la.attrs["origin"], 3)
             cam["target"] = _floats(la, la.attrs["target"], 3)
             cam["up"] = _floats(la, la.attrs.get("up", "0, 1, 0"), 3)
+            if kind == "orthographic":  # Mitsuba's view: [-1, 1] across, unscaled
+                cam["width"] = 2.0
         else:
             cam["to_world"] = [{"matrix": [[float(x) for x in row] for row in m]}]
         for k in ("near_clip", "far_clip"):

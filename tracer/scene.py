@@ -899,6 +899,8 @@ def _parse_light(t: _Table) -> Light:
 
 def _parse_steps(t: _Table, key: str) -> np.ndarray:
     steps = t.raw(key, [])
+    if isinstance(steps, dict):  # one step given as a table: { matrix = [...] }
+        steps = [steps]
     if not isinstance(steps, list):
         t.fail(key, "expected a list of steps like [{ translate = [x, y, z] }], "
                     f"got {_show(steps)}")
