@@ -276,13 +276,35 @@ def transform_matrix(node: Node) -> np.ndarray:
 APPROXIMATIONS = {
     "roughconductor": ("conductor", "its roughness (a smooth conductor instead)"),
     "roughdielectric": ("dielectric", "its roughness (a smooth dielectric instead)"),
-    "thindielectric": None,
     "roughplastic": ("plastic", "its roughness (a smooth plastic instead)"),
     "principled": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
     "principledthin": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
     "blendbsdf": ("diffuse", "the blend (its first BSDF's diffuse colour, or grey)"),
     "bumpmap": ("inner", "the bump map (the BSDF it wraps instead)"),
     "normalmap": ("inner", "the normal map (the BSDF it wraps instead)"),
+}
+
+
+#: Mitsuba BSDF plugin -> the importer's method that maps it (one line per plugin).
+BSDFS = {
+    "twosided": "_twosided",
+    "mask": "_mask",
+    "diffuse": "_diffuse",
+    "dielectric": "_dielectric",
+    "thindielectric": "_thindielectric",
+    "conductor": "_conductor",
+    "plastic": "_plastic",
+    "whitted_phong": "_whitted_phong",
+}
+
+#: Mitsuba emitter plugin (outside shapes) -> the importer's method that maps it.
+LIGHTS = {
+    "point": "_point",
+    "spot": "_spot",
+    "directional": "_directional",
+    "constant": "_constant",
+    "envmap": "_envmap",
+    "whitted_background": "_whitted_background",
 }
 
 
@@ -609,81 +631,91 @@ class _Importer:
         return name
 
     def bsdf(self, node: Node, where: str, two_sided: bool) -> dict:
+        """A <bsdf> as a [materials] table, through the table of Mitsuba plugins (BSDFS)."""
         p = self.props(node)
         kind = node.type
-        if kind == "twosided":
-            inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
-            if len(inner) != 1:
-                self.outside(node, "a twosided BSDF with two different sides", None, where)
-            return self.bsdf(self.res.deref(inner[0]), where, two_sided=True)
-        if kind == "mask":
-            inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
-            out = self.bsdf(self.res.deref(inner[0]), where, two_sided)
-            out["opacity"] = self.scalar_or_color(p.get("opacity"), where, 0.5)
-            return out
         if kind in APPROXIMATIONS and APPROXIMATIONS[kind] is not None:
             nearest, lost = APPROXIMATIONS[kind]
             if nearest == "inner":
-                inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
                 self.outside(node, f'a "{kind}" BSDF', "the BSDF it wraps", where)
-                return self.bsdf(self.res.deref(inner[0]), where, two_sided)
+                return self.bsdf(self._inner(node), where, two_sided)
             self.outside(node, f'a "{kind}" BSDF ({lost.split(" (")[0]} lost)',
                          f'a smooth "{nearest}"', where)
             if nearest == "diffuse":
                 colour = p.get("base_color") or p.get("reflectance")
-                out = {"type": "diffuse",
-                       "reflectance": self.color(colour, where, [0.5] * 3)}
-                return self._sided(out, two_sided)
+                return self._sided({"type": "diffuse",
+                                    "reflectance": self.color(colour, where, [0.5] * 3)},
+                                   two_sided)
             kind = nearest
-        if kind == "diffuse":
-            out = {"type": "diffuse", "reflectance": self.color(p.get("reflectance"), where,
-                                                                [0.5] * 3)}
-            return self._sided(out, two_sided)
-        if kind == "dielectric":
-            out = {"type": "dielectric", "ior": self.ior(p.get("int_ior"), 1.5046, where),
-                   "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
-            for k in ("specular_reflectance", "specular_transmittance"):
-                if k in p and self.color(p[k], where) != [1.0] * 3:
-                    self.outside(p[k], f"a dielectric's {k} other than 1", None, where)
-            return out
-        if kind == "thindielectric":
-            return {"type": "thindielectric",
-                    "ior": self.ior(p.get("int_ior"), 1.5046, where),
-                    "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
-        if kind == "conductor":
-            spec = self.color(p.get("specular_reflectance"), where, [1.0] * 3)
-            mat = self.string(p.get("material"), "none" if "eta" not in p else None)
-            if mat == "none" and "eta" not in p:
-                out = {"type": "mirror", "reflectance": spec}
-                self.note(where, 'conductor with material "none": a perfect mirror')
-                return self._sided(out, two_sided)
-            out = {"type": "conductor"}
-            if "eta" in p:
-                out["eta"] = self.color(p["eta"], where)
-                out["k"] = self.color(p.get("k"), where, [0.0] * 3)
-            else:
-                out["material"] = mat
-            if spec != [1.0] * 3:
-                out["specular_reflectance"] = spec
-            return self._sided(out, two_sided)
-        if kind == "whitted_phong":  # the tracer's own Phong model, as `whitted export` writes it
-            out = {"type": "phong", "diffuse": self.color(p.get("diffuse"), where, [0.5] * 3),
-                   "specular": self.color(p.get("specular"), where, [0.2] * 3),
-                   "exponent": float(self.number(p.get("exponent"), 32.0)),
-                   "model": self.string(p.get("model"), "phong")}
-            return self._sided(out, two_sided)
-        if kind == "plastic":
-            out = {"type": "plastic",
-                   "diffuse_reflectance": self.color(p.get("diffuse_reflectance"), where,
-                                                     [0.5] * 3),
-                   "specular_reflectance": self.color(p.get("specular_reflectance"), where,
-                                                      [1.0] * 3),
-                   "ior": self.ior(p.get("int_ior"), 1.49, where),
-                   "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
-            if self.boolean(p.get("nonlinear"), False):
-                out["nonlinear"] = True
-            return self._sided(out, two_sided)
-        self.outside(node, f'a "{kind}" BSDF', None, where)
+        if kind not in BSDFS:
+            self.outside(node, f'a "{kind}" BSDF', None, where)
+        return getattr(self, BSDFS[kind])(node, p, where, two_sided)
+
+    def _inner(self, node: Node) -> Node:
+        inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1:
+            raise XMLImportError(f"{node.where()}: expected one nested BSDF")
+        return self.res.deref(inner[0])
+
+    def _twosided(self, node, p, where, two_sided):
+        return self.bsdf(self._inner(node), where, two_sided=True)
+
+    def _mask(self, node, p, where, two_sided):
+        out = self.bsdf(self._inner(node), where, two_sided)
+        out["opacity"] = self.scalar_or_color(p.get("opacity"), where, 0.5)
+        return out
+
+    def _diffuse(self, node, p, where, two_sided):
+        return self._sided({"type": "diffuse",
+                            "reflectance": self.color(p.get("reflectance"), where, [0.5] * 3)},
+                           two_sided)
+
+    def _dielectric(self, node, p, where, two_sided):
+        for k in ("specular_reflectance", "specular_transmittance"):
+            if k in p and self.color(p[k], where) != [1.0] * 3:
+                self.outside(p[k], f"a dielectric's {k} other than 1", None, where)
+        return {"type": "dielectric", "ior": self.ior(p.get("int_ior"), 1.5046, where),
+                "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+
+    def _thindielectric(self, node, p, where, two_sided):
+        return {"type": "thindielectric", "ior": self.ior(p.get("int_ior"), 1.5046, where),
+                "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+
+    def _conductor(self, node, p, where, two_sided):
+        spec = self.color(p.get("specular_reflectance"), where, [1.0] * 3)
+        mat = self.string(p.get("material"), "none" if "eta" not in p else None)
+        if mat == "none" and "eta" not in p:
+            self.note(where, 'conductor with material "none": a perfect mirror')
+            return self._sided({"type": "mirror", "reflectance": spec}, two_sided)
+        out = {"type": "conductor"}
+        if "eta" in p:
+            out["eta"] = self.color(p["eta"], where)
+            out["k"] = self.color(p.get("k"), where, [0.0] * 3)
+        else:
+            out["material"] = mat
+        if spec != [1.0] * 3:
+            out["specular_reflectance"] = spec
+        return self._sided(out, two_sided)
+
+    def _whitted_phong(self, node, p, where, two_sided):
+        # the tracer's own Phong model, as `whitted export` writes it
+        return self._sided({"type": "phong",
+                            "diffuse": self.color(p.get("diffuse"), where, [0.5] * 3),
+                            "specular": self.color(p.get("specular"), where, [0.2] * 3),
+                            "exponent": float(self.number(p.get("exponent"), 32.0)),
+                            "model": self.string(p.get("model"), "phong")}, two_sided)
+
+    def _plastic(self, node, p, where, two_sided):
+        out = {"type": "plastic",
+               "diffuse_reflectance": self.color(p.get("diffuse_reflectance"), where,
+                                                 [0.5] * 3),
+               "specular_reflectance": self.color(p.get("specular_reflectance"), where,
+                                                  [1.0] * 3),
+               "ior": self.ior(p.get("int_ior"), 1.49, where),
+               "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+        if self.boolean(p.get("nonlinear"), False):
+            out["nonlinear"] = True
+        return self._sided(out, two_sided)
 
     def scalar_or_color(self, node, where, default):
         v = self.color(node, where, [default] * 3)
@@ -698,50 +730,54 @@ class _Importer:
     # -------------------------------------------------------------- emitters
 
     def light(self, node: Node) -> None:
+        """An <emitter> as a [[lights]] table, through the table of Mitsuba plugins (LIGHTS)."""
         p = self.props(node)
         where = f"lights[{len(self.out['lights'])}]"
-        m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
-        kind = node.type
-        if kind == "point":
-            pos = _xyz(p["position"]) if "position" in p else list(m[:3, 3])
-            light = {"type": "point", "position": [float(x) for x in pos],
-                     "intensity": self.color(p.get("intensity"), where, [1.0] * 3)}
-        elif kind == "spot":
-            pos = tf.apply_point(m, (0, 0, 0))
-            target = tf.apply_point(m, (0, 0, 1))
-            cutoff = float(self.number(p.get("cutoff_angle"), 20.0))
-            light = {"type": "spot", "position": [float(x) for x in pos],
-                     "target": [float(x) for x in target],
-                     "intensity": self.color(p.get("intensity"), where, [1.0] * 3),
-                     "cutoff_angle": cutoff,
-                     "beam_width": float(self.number(p.get("beam_width"), cutoff * 0.75))}
-            if "texture" in p:
-                light["texture"] = self.color(p["texture"], where)
-        elif kind == "directional":
-            if "direction" in p:
-                d = _xyz(p["direction"])
-            else:
-                d = tf.apply_vector(m, (0, 0, 1))
-            light = {"type": "directional", "direction": [float(x) for x in d],
-                     "irradiance": self.color(p.get("irradiance"), where, [1.0] * 3)}
-        elif kind == "constant":
-            light = {"type": "constant",
-                     "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
-        elif kind == "envmap":
-            light = {"type": "envmap",
-                     "filename": str(self.res.find(node, self.string(p.get("filename"))))}
-            if "scale" in p:
-                light["scale"] = float(self.number(p["scale"]))
-            if "to_world" in p:
-                light["to_world"] = self.to_world(p["to_world"])
-        elif kind == "whitted_background":  # the tracer's background, as `whitted export` writes it
-            light = {"type": "background",
-                     "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
-        elif kind == "area":
+        if node.type == "area":
             raise XMLImportError(f"{node.where()}: an area emitter belongs inside a <shape>")
-        else:
-            self.outside(node, f'emitter "{kind}"', None, where)
-        self.out["lights"].append(light)
+        if node.type not in LIGHTS:
+            self.outside(node, f'emitter "{node.type}"', None, where)
+        m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        self.out["lights"].append(getattr(self, LIGHTS[node.type])(node, p, m, where))
+
+    def _point(self, node, p, m, where):
+        pos = _xyz(p["position"]) if "position" in p else list(m[:3, 3])
+        return {"type": "point", "position": [float(x) for x in pos],
+                "intensity": self.color(p.get("intensity"), where, [1.0] * 3)}
+
+    def _spot(self, node, p, m, where):
+        cutoff = float(self.number(p.get("cutoff_angle"), 20.0))
+        light = {"type": "spot",
+                 "position": [float(x) for x in tf.apply_point(m, (0, 0, 0))],
+                 "target": [float(x) for x in tf.apply_point(m, (0, 0, 1))],
+                 "intensity": self.color(p.get("intensity"), where, [1.0] * 3),
+                 "cutoff_angle": cutoff,
+                 "beam_width": float(self.number(p.get("beam_width"), cutoff * 0.75))}
+        if "texture" in p:
+            light["texture"] = self.color(p["texture"], where)
+        return light
+
+    def _directional(self, node, p, m, where):
+        d = _xyz(p["direction"]) if "direction" in p else tf.apply_vector(m, (0, 0, 1))
+        return {"type": "directional", "direction": [float(x) for x in d],
+                "irradiance": self.color(p.get("irradiance"), where, [1.0] * 3)}
+
+    def _constant(self, node, p, m, where):
+        return {"type": "constant", "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
+
+    def _envmap(self, node, p, m, where):
+        light = {"type": "envmap",
+                 "filename": str(self.res.find(node, self.string(p.get("filename"))))}
+        if "scale" in p:
+            light["scale"] = float(self.number(p["scale"]))
+        if "to_world" in p:
+            light["to_world"] = self.to_world(p["to_world"])
+        return light
+
+    def _whitted_background(self, node, p, m, where):
+        # the tracer's background, as `whitted export` writes it
+        return {"type": "background",
+                "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
 
     # -------------------------------------------------------------- shapes
 
