@@ -452,3 +452,18 @@ def test_export_then_import_gives_the_same_scene(path, tmp_path):
 def test_import_writes_relative_mesh_paths(tmp_path):
     text, _ = import_scene(FLOATING, tmp_path / "out" / "s.toml")
     assert 'file = "../' in text and str(tmp_path) not in text
+
+
+def test_rendering_xml_never_imports_mitsuba(tmp_path):
+    """`whitted render scene.xml` reads the XML itself: Mitsuba is never imported."""
+    import subprocess
+    import sys
+
+    (tmp_path / "parts").mkdir()
+    _write(tmp_path / "parts", "light.xml", LIGHT)
+    path = _write(tmp_path, "s.xml", SCENE)
+    code = ("import sys; from reference.cli import main; "
+            f"rc = main(['render', {str(path)!r}, '-o', {str(tmp_path / 'x.exr')!r}]); "
+            "sys.exit(10 if 'mitsuba' in sys.modules else rc)")
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
+    assert r.returncode == 0, (r.returncode, r.stderr)
