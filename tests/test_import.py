@@ -467,3 +467,23 @@ def test_rendering_xml_never_imports_mitsuba(tmp_path):
             "sys.exit(10 if 'mitsuba' in sys.modules else rc)")
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT)
     assert r.returncode == 0, (r.returncode, r.stderr)
+
+
+def test_camera_to_world_in_toml_and_its_errors():
+    base = {"materials": {"m": {"type": "diffuse"}}}
+    ok = parse_scene({**base, "camera": {"to_world": {"matrix": [
+        -1, 0, 0, 0, 0, 1, 0, 0, 0, 0, -1, 4, 0, 0, 0, 1]}, "fov_axis": "y"}}, "c.toml")
+    assert ok.camera.origin == (0.0, 0.0, 4.0) and ok.camera.target == (0.0, 0.0, 3.0)
+    with pytest.raises(SceneError, match="camera.origin: give either to_world or origin"):
+        parse_scene({**base, "camera": {"to_world": [{"translate": [0, 0, 1]}],
+                                        "origin": [0, 0, 1]}}, "c.toml")
+    with pytest.raises(SceneError, match="camera.to_world: a perspective camera's to_world"):
+        parse_scene({**base, "camera": {"to_world": [{"scale": 2}]}}, "c.toml")
+    with pytest.raises(SceneError, match="camera.origin: missing.*or give to_world"):
+        parse_scene({**base, "camera": {"target": [0, 0, 1]}}, "c.toml")
+    with pytest.raises(SceneError, match="camera.fov_axis: expected one of"):
+        parse_scene({**base, "camera": {"origin": [0, 0, 1], "target": [0, 0, 0],
+                                        "fov_axis": "z"}}, "c.toml")
+    with pytest.raises(SceneError, match="film.stddev: stddev is for"):
+        parse_scene({**base, "film": {"stddev": 0.5},
+                     "camera": {"origin": [0, 0, 1], "target": [0, 0, 0]}}, "c.toml")
