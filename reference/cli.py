@@ -71,10 +71,16 @@ def output_folder(path) -> Path:
     return check_output_folder(path)
 
 
-def load(args):
-    from tracer import load_scene
+def load_scene_arg(args):
+    """SCENE as given: a TOML scene, a built-in name, or Mitsuba XML (read without Mitsuba)."""
+    from tracer.scene import load_any
 
-    scene = load_scene(resolve_scene(args.scene))
+    return load_any(resolve_scene(args.scene), getattr(args, "approximate", False),
+                    warn=lambda line: print(f"warning: {line}", flush=True))
+
+
+def load(args):
+    scene = load_scene_arg(args)
     return scene.with_overrides(spp=args.spp, max_depth=_max_depth(args), size=args.size)
 
 
@@ -360,6 +366,11 @@ def cmd_compare(args) -> int:
     check_render(scene)
     check_render(scene, moments=True, mitsuba=True)
     _note_spp(scene)
+    if scene.film.filter != "box" or scene.film.jitter:
+        print("note: compare judges both sides at the strata centres with the box filter "
+              f"(the scene's {scene.film.filter} filter"
+              f"{' and jitter' if scene.film.jitter else ''} weigh and place the same "
+              "samples alike on both sides)", flush=True)
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
     _backend(args)
     result, _, _ = compare_scene(scene, outdir, reference,
@@ -399,6 +410,39 @@ def cmd_export(args) -> int:
 
     files = write_xml(scene, out, args.integrator)
     print("wrote " + ", ".join(shown(f) for f in files))
+    return EXIT_OK
+
+
+def cmd_import(args) -> int:
+    from reference.importer import disagreements, import_scene, mitsuba_view
+    from tracer.errors import UserError
+    from tracer.imageio import check_output_path
+    from tracer.scene import parse_scene
+
+    out = check_output_path(args.output, (".toml",), "file type")
+    params = {}
+    for item in args.param or []:
+        name, sep, value = item.partition("=")
+        if not sep or not name:
+            raise UserError(f"-D {item}: expected NAME=VALUE")
+        params[name] = value
+    text, imp = import_scene(args.xml, out, args.approximate, **params)
+    for line in imp.warnings:
+        print(f"warning: {line}", flush=True)
+    out.write_text(text)
+    try:  # what render would refuse, said now
+        scene = parse_scene(imp.data, str(out))
+    except UserError as e:
+        raise UserError(f"wrote {shown(out)}, but the tracer cannot load it: {e}") from None
+    if args.verify:
+        problems = disagreements(scene, mitsuba_view(args.xml, **params))
+        if problems:
+            raise UserError(f"{shown(args.xml)}: the import disagrees with Mitsuba's own "
+                            "loading: " + "; ".join(problems))
+    n = sum(len(v) for v in imp.notes.values())
+    print(f"wrote {shown(out)} ({len(scene.shapes)} shapes, {len(scene.lights)} lights; "
+          f"{n} notes as comments" + (", APPROXIMATE" if imp.approximate else "")
+          + (", camera and film verified against Mitsuba" if args.verify else "") + ")")
     return EXIT_OK
 
 
@@ -479,9 +523,12 @@ def cmd_report(args) -> int:
     report = build_report(out, paths, quick=args.quick, fresnel=not args.no_fresnel,
                           reference=args.reference,
                           second_opinion=False if args.no_second_opinion else None,
-                          mutants=sweep, luxcore=luxcore)
+                          mutants=sweep, luxcore=luxcore,
+                          imported=not args.no_imported and args.scenes is None)
     print(f"{'PASS' if report.passed else 'FAIL'} in {report.seconds:.0f} s: "
           f"{sum(s['pass'] for s in report.scenes)}/{len(report.scenes)} scenes pass"
+          + ("" if not report.imported else
+             f", imported {sum(r['passed'] for r in report.imported)}/{len(report.imported)}")
           + ("" if args.no_fresnel else
              f", Fresnel curves {'pass' if report.fresnel_passed else 'FAIL'}")
           + ("" if report.mutants is None else
@@ -715,10 +762,8 @@ def cmd_check(args) -> int:
 
     th = _thresholds(args)
     user = read_user_image(args.image, args.encoding)   # bad input before any rendering
-    from tracer import load_scene
-
     # --spp is the image's samples, not the reference's: the film keeps the scene's strata.
-    scene = load_scene(resolve_scene(args.scene)).with_overrides(
+    scene = load_scene_arg(args).with_overrides(
         max_depth=_max_depth(args), size=args.size)
     w, h = scene.film.width, scene.film.height
     if user.size != (w, h):
@@ -837,7 +882,11 @@ def build_parser() -> argparse.ArgumentParser:
     sub = p.add_subparsers(dest="command", metavar="COMMAND", required=True)
 
     def scene_opts(sp, output_help=None, output_required=True, seed=True):
-        sp.add_argument("scene", metavar="SCENE", help="scene file (.toml) or built-in name")
+        sp.add_argument("scene", metavar="SCENE",
+                        help="scene file (.toml), built-in name, or Mitsuba 3 scene (.xml)")
+        sp.add_argument("--approximate", action="store_true",
+                        help="Mitsuba XML: replace what lies outside the Whitted subset (rough "
+                             "BSDFs, ...) by its nearest equivalent, warning once per kind")
         if output_help:
             sp.add_argument("-o", "--output", required=output_required, help=output_help)
         sp.add_argument("--spp", type=_positive, help="samples per pixel (rounded up to a square)")
@@ -920,6 +969,25 @@ def build_parser() -> argparse.ArgumentParser:
                         "before loading; direct and path are stock Mitsuba)")
     e.set_defaults(func=cmd_export)
 
+    im = sub.add_parser("import", help="write a Mitsuba 3 XML scene as a TOML scene",
+                        description="Read a Mitsuba 3 XML scene (default/$param, include, "
+                                    "ref, path, nested transforms; rgb and one-valued spectra "
+                                    "as RGB; named IORs) and write it as a TOML scene, meshes "
+                                    "referenced, with a comment wherever something was "
+                                    "approximated. Elements outside the Whitted subset exit 2 "
+                                    "naming the element and its line.")
+    im.add_argument("xml", metavar="SCENE.xml", help="Mitsuba 3 scene file")
+    im.add_argument("-o", "--output", required=True, help="output .toml file")
+    im.add_argument("--approximate", action="store_true",
+                    help="replace what lies outside the Whitted subset (rough conductor -> "
+                         "conductor, ...) by its nearest equivalent, warning once per kind")
+    im.add_argument("-D", dest="param", action="append", metavar="NAME=VALUE",
+                    help="value of a $NAME parameter of the file (overrides its <default>)")
+    im.add_argument("--verify", action="store_true",
+                    help="also load the file with Mitsuba and check that the camera and film "
+                         "agree with Mitsuba's")
+    im.set_defaults(func=cmd_import)
+
     f = sub.add_parser("fresnel", help="compare Fresnel curves with Mitsuba's",
                        description="Tabulate our exact Fresnel reflectance and Schlick's "
                                    "approximation over 0..90 degrees from both sides of the "
@@ -958,6 +1026,10 @@ def build_parser() -> argparse.ArgumentParser:
     rp.add_argument("--no-mutants", action="store_true",
                     help="skip the formula-bug sweep (whitted mutants), which otherwise runs "
                          "over the same scenes unless --scenes picks some of them")
+    rp.add_argument("--no-imported", action="store_true",
+                    help="skip the imported group: Mitsuba scenes (its data repository's, "
+                         "mi.cornell_box()) imported and compared with Mitsuba's render of "
+                         "the originals; it runs unless --scenes picks scenes")
     rp.add_argument("--reference", choices=("deterministic", "onelobe"), default="deterministic",
                     help="Mitsuba's side of every scene (see whitted compare --help; default "
                          "deterministic)")

@@ -9,8 +9,11 @@ scene                     Mitsuba
 ========================  ===================================================
 perspective camera        ``perspective``, ``fov_axis = "x"``, same clip planes
 orthographic camera       ``orthographic``, ``to_world`` = look_at x scale(w/2)
-film                      ``hdrfilm``, ``box`` filter, rgb float32
-spp                       ``stratified`` sampler, ``jitter = false``
+film                      ``hdrfilm``, ``box`` or ``gaussian`` filter, rgb float32
+spp                       ``stratified`` sampler, ``jitter`` as the film's
+camera to_world           ``to_world`` as given (``fov_axis`` and principal
+                          point offsets as given)
+cube                      ``cube`` with ``to_world``
 diffuse                   ``twosided`` ``diffuse``
 mirror                    ``twosided`` ``conductor`` (``material = "none"``)
 dielectric                ``dielectric`` with ``int_ior`` and ``ext_ior`` set
@@ -59,6 +62,7 @@ from reference.materials.textures import texture_tree as texture_tree
 from reference.mitsuba_tree import matrix as _matrix
 from tracer import transform as tf
 from tracer.scene import (
+    Cube,
     Cylinder,
     Disk,
     Instance,
@@ -75,15 +79,20 @@ from tracer.scene import (
 def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
     """Sensor, film and sampler; ``jitter`` places samples at random inside their strata."""
     cam, film = scene.camera, scene.film
-    look = tf.look_at(cam.origin, cam.target, cam.up)
+    look = cam.to_world()
     sensor = {"near_clip": ("float", cam.near_clip), "far_clip": ("float", cam.far_clip)}
     dx, dy = cam.pixel_offset
     if cam.type == "perspective":
-        sensor.update(type="perspective", fov=("float", cam.fov), fov_axis=("string", "x"),
-                      to_world=_matrix(look))
-        if dx or dy:  # moving the samples by (dx, dy) pixels = moving the principal point
-            sensor["principal_point_offset_x"] = ("float", dx / film.width)
-            sensor["principal_point_offset_y"] = ("float", dy / film.height)
+        sensor.update(type="perspective", fov=("float", cam.fov),
+                      fov_axis=("string", cam.fov_axis), to_world=_matrix(look))
+        ppx = dx / film.width + cam.principal_point[0]
+        ppy = dy / film.height + cam.principal_point[1]
+        if ppx or ppy:  # moving the samples by (dx, dy) pixels = moving the principal point
+            sensor["principal_point_offset_x"] = ("float", ppx)
+            sensor["principal_point_offset_y"] = ("float", ppy)
+    elif cam.matrix is not None:  # to_world given: it scales the [-1, 1]^2 view itself
+        shift = tf.translate([-2 * dx / film.width, -2 * dy / film.width, 0])
+        sensor.update(type="orthographic", to_world=_matrix(look @ shift))
     else:
         half = cam.width / 2
         # Mitsuba's camera space has +x to the image's left and +y to its top: moving
@@ -93,13 +102,20 @@ def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
         sensor.update(type="orthographic",
                       to_world=_matrix(look @ shift @ tf.scale([half, half, 1])))
     sensor["film"] = {"type": "hdrfilm", "width": ("integer", film.width),
-                      "height": ("integer", film.height), "rfilter": {"type": "box"},
+                      "height": ("integer", film.height), "rfilter": rfilter_tree(film),
                       "pixel_format": ("string", "rgb"),
                       "component_format": ("string", "float32"),
                       "sample_border": ("boolean", False)}
     sensor["sampler"] = {"type": "stratified", "sample_count": ("integer", film.strata ** 2),
-                         "jitter": ("boolean", jitter)}
+                         "jitter": ("boolean", jitter or film.jitter)}
     return sensor
+
+
+def rfilter_tree(film) -> dict:
+    """Mitsuba's reconstruction filter of the film: ``box``, or ``gaussian`` with its stddev."""
+    if film.filter == "gaussian":
+        return {"type": "gaussian", "stddev": ("float", film.stddev)}
+    return {"type": "box"}
 
 
 #: Largest distance of a paraboloid's chords from the surface, relative to its size.
@@ -194,6 +210,8 @@ def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape",
     elif isinstance(shape, Paraboloid):
         verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape)
         t = _mesh_node(name, verts, faces, normals, uvs)
+    elif isinstance(shape, Cube):
+        t = {"type": "cube", "to_world": _matrix(shape.to_world)}
     elif isinstance(shape, Mesh):
         kind = "ply" if shape.file.lower().endswith(".ply") else "obj"
         t = {"type": kind, "filename": ("string", shape.file),
@@ -383,6 +401,22 @@ def _write_obj(path: Path, node: dict) -> None:
     path.write_text("".join(lines))
 
 
+def _relative_mesh_files(tree: dict, folder: Path) -> None:
+    """Mesh files named relative to the XML's folder, where Mitsuba looks for them."""
+    import os
+
+    for v in tree.values():
+        if isinstance(v, dict):
+            if v.get("type") in ("obj", "ply") and "filename" in v:
+                name = os.path.abspath(v["filename"][1])
+                try:
+                    name = os.path.relpath(name, folder)
+                except ValueError:  # another drive: keep it absolute
+                    pass
+                v["filename"] = ("string", name)
+            _relative_mesh_files(v, folder)
+
+
 def _comment(text: str) -> str:
     """Text safe inside an XML comment (no "--", printable)."""
     from tracer.errors import one_line
@@ -404,6 +438,7 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
     path = Path(path)
     mesh_prefix = path.stem + "_"
     tree = scene_tree(scene, integrator, jitter=jitter)
+    _relative_mesh_files(tree, path.resolve().parent)
     meshes: list[dict] = []
     body = []
     for key, value in tree.items():
@@ -420,7 +455,8 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
                if any(f'type="{name}"' in line for line in body)]
     note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
             "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
-            "--integrator direct for a stock integrator.") if integrator == "whitted" else ""
+            "the integrator option set to direct for a stock integrator (an XML comment may not "
+            "hold two dashes in a row).") if integrator == "whitted" else ""
     if plugins:
         note += (" It uses plugins written on Mitsuba's API (" +
                  ", ".join(f"`{name}`" for name in plugins) + "), registered by "

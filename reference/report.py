@@ -55,13 +55,16 @@ class Report:
     seconds: float = 0.0
     #: the formula-bug sweep (reference.mutants.SweepResult.to_json()), or None
     mutants: dict | None = None
+    #: Mitsuba scenes imported and compared with Mitsuba's render of the original
+    #: (reference.importer.validate_case dicts)
+    imported: list = field(default_factory=list)
 
     def to_json(self) -> dict:
         return {"pass": self.passed, "quick": self.quick, "date": self.date,
                 "versions": self.versions, "machine": self.machine,
                 "seconds": self.seconds, "scenes": self.scenes,
                 "fresnel_pass": self.fresnel_passed, "fresnel": self.fresnel,
-                "mutants": self.mutants}
+                "mutants": self.mutants, "imported": self.imported}
 
 
 def versions() -> dict:
@@ -129,7 +132,7 @@ def quick_overrides(scene):
 def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = False,
                  log=print, fresnel: bool = True, reference: str = "deterministic",
                  second_opinion: bool | None = None, mutants: bool = False,
-                 luxcore: bool = False) -> Report:
+                 luxcore: bool = False, imported: bool = False) -> Report:
     """Compare every scene, tabulate the Fresnel curves, write the three report files.
 
     ``mutants``: also run the formula-bug sweep of :mod:`reference.mutants` over the
@@ -208,6 +211,18 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
             f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
             f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    if imported:
+        from reference.importer import imported_cases, validate_case
+
+        for case in imported_cases(quick):
+            t0 = time.perf_counter()
+            entry = validate_case(case, work / "imported")
+            report.imported.append(entry)
+            report.passed &= entry["passed"]
+            log(f"[imported] {case.name:<20} {'z-test + mean':<22} "
+                f"{'pass' if entry['passed'] else 'FAIL'}"
+                f"{' (approximate)' if entry['approximate'] else ''}  "
+                f"({time.perf_counter() - t0:.1f} s)")
     report.seconds = time.perf_counter() - start
     data = report.to_json()
     data["scenes"] = [{k: v for k, v in s.items() if k not in ("images", "viewer")}
@@ -381,8 +396,54 @@ def markdown(report: Report) -> str:
                 f"{'pass' if ok else '**FAIL**'} |")
     if report.mutants:
         lines += ["", _mutants_markdown(report.mutants)]
+    if report.imported:
+        lines += ["", _imported_markdown(report.imported)]
     lines.append("")
     return "\n".join(lines)
+
+
+_IMPORTED_TEXT = ("Mitsuba scenes (from Mitsuba's data repository, and mi.cornell_box()) "
+                  "imported by `whitted import`, rendered by the tracer at max_depth 2, and "
+                  "compared with Mitsuba's render of the *original* scene (its own filter "
+                  "and sampler) under the named integrator: per-pixel z-test against the "
+                  "variance of both means (Sidak-corrected, >= 99.75 % of pixels pass) and "
+                  "the image means within 4 standard errors. Scenes marked approximate had "
+                  "parts outside the Whitted subset replaced.")
+
+
+def _imported_markdown(rows: list) -> str:
+    lines = ["## Imported Mitsuba scenes", "", _IMPORTED_TEXT, "",
+             "| scene | source | integrator | size, spp x passes | filter | z-test pixels "
+             "passing | means differ by | mean z | tracer s | Mitsuba s | result |",
+             "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        res = "pass" if r["passed"] else "**FAIL**"
+        if r["approximate"]:
+            res += " (approximate)"
+        lines.append(f"| {r['name']} | {r['source']} | {r['integrator']} | "
+                     f"{r['size'][0]}x{r['size'][1]}, {r['spp']} x {r['passes']} | "
+                     f"{r['filter']} | {100 * r['z_fraction_passed']:.2f} % | "
+                     f"{100 * r['mean_rel_diff']:.3f} % | {r['mean_z']:.2f} | "
+                     f"{r['seconds']['tracer']:.1f} | {r['seconds']['mitsuba']:.1f} | {res} |")
+    return "\n".join(lines)
+
+
+def _imported_html(rows: list) -> str:
+    esc = html.escape
+    parts = ["<h2 id='imported'>Imported Mitsuba scenes</h2>", f"<p>{esc(_IMPORTED_TEXT)}</p>",
+             "<table><tr><th>scene</th><th>source</th><th>integrator</th><th>size, spp x "
+             "passes</th><th>filter</th><th>z-test pixels passing</th><th>means differ by</th>"
+             "<th>mean z</th><th>result</th></tr>"]
+    for r in rows:
+        extra = " <span class='expected'>(approximate)</span>" if r["approximate"] else ""
+        parts.append(f"<tr><td>{esc(r['name'])}</td><td>{esc(r['source'])}</td>"
+                     f"<td>{esc(r['integrator'])}</td><td>{r['size'][0]}x{r['size'][1]}, "
+                     f"{r['spp']} x {r['passes']}</td><td>{esc(r['filter'])}</td>"
+                     f"<td>{100 * r['z_fraction_passed']:.2f} %</td>"
+                     f"<td>{100 * r['mean_rel_diff']:.3f} %</td><td>{r['mean_z']:.2f}</td>"
+                     f"<td>{_verdict(r['passed'])}{extra}</td></tr>")
+    parts.append("</table>")
+    return "\n".join(parts)
 
 
 def _margin(x) -> str:
@@ -517,6 +578,8 @@ def html_page(report: Report, outdir: Path) -> str:
         parts.append(_fresnel_html(report, outdir))
     if report.mutants:
         parts.append(_mutants_html(report.mutants))
+    if report.imported:
+        parts.append(_imported_html(report.imported))
     parts.append("</body></html>\n")
     return "\n".join(parts)
 

@@ -18,7 +18,7 @@ BAD = [
     ("invalid_toml", ("[film]", "[film"), "", "not valid TOML"),
     ("unknown_key", ("radius = 1", "radius = 1\nradiuss = 2"), "shapes[0].radiuss",
      "unknown key"),
-    ("unknown_shape_type", ('type = "sphere"', 'type = "cube"'), "shapes[0].type",
+    ("unknown_shape_type", ('type = "sphere"', 'type = "torus"'), "shapes[0].type",
      "expected one of"),
     ("unknown_material_type", ('type = "diffuse"', 'type = "velvet"'), "materials.white.type",
      "expected one of"),

@@ -25,6 +25,17 @@ upper-left corner, as Heckbert's minray does (its ray for pixel (x, y) goes
 through (x - W/2, W/2 / tan(fov/2), H/2 - y) on an image plane that spans
 the field of view, i.e. through film position (x, y)).
 
+``fov_axis`` other than "x" is converted to the horizontal field of view as
+Mitsuba does (:meth:`tracer.scene.Camera.fov_x`); Mitsuba's principal point
+offset (ppx, ppy), in fractions of the film, moves every film position by
+(ppx W, ppy H) pixels, as its ``perspective`` sensor adds it to the sample.
+
+A camera given by ``to_world`` (a 4x4 matrix M) takes its frame from M's
+columns: local +x is the image's left, +y its top, +z the view direction,
+the fourth column the eye (Mitsuba's camera space). An orthographic camera
+then spans [-1, 1] x [-1/aspect, 1/aspect] of its local xy plane, scaled by
+M, so that its rays start at M (x, y, near_clip) and run along M's +z.
+
 Orthographic: all rays are parallel to f; the view is ``width`` wide in
 world units and width / aspect high, and a ray starts at
 origin + (2u - 1) width/2 r + (1 - 2v) width/2 / aspect up' + near_clip f.
@@ -42,6 +53,10 @@ from tracer.scene import Camera
 
 def frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(right, up', forward) unit vectors of the camera, float64."""
+    if camera.matrix is not None:
+        m = np.asarray(camera.matrix, dtype=np.float64)[:3, :3]
+        cols = [-m[:, 0], m[:, 1], m[:, 2]]  # local +x is the image's left
+        return tuple(c / np.linalg.norm(c) for c in cols)
     f = np.subtract(camera.target, camera.origin).astype(np.float64)
     f /= np.linalg.norm(f)
     r = np.cross(f, camera.up)
@@ -58,6 +73,8 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
     r, up, f = (_vec(x) for x in frame(camera))
     aspect = width / height
     dx, dy = camera.pixel_offset
+    ppx, ppy = camera.principal_point
+    dx, dy = dx + ppx * width, dy + ppy * height
     if dx or dy:
         film_x, film_y = film_x + dx, film_y + dy
     sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
@@ -66,7 +83,7 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         sy = 2 * (film_y / height) - 1
     eye = _vec(camera.origin)
     if camera.type == "perspective":
-        tan_half = math.tan(math.radians(camera.fov) / 2)
+        tan_half = math.tan(math.radians(camera.fov_x(aspect)) / 2)
         d = f + (sx * tan_half) * r + (sy * tan_half / aspect) * up
         if faults.on("fov-vertical-for-horizontal"):
             d = f + (sx * tan_half * aspect) * r + (sy * tan_half) * up
@@ -75,6 +92,12 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         near_t = camera.near_clip * length
         o = eye + d * near_t
         tmax = camera.far_clip * length - near_t
+    elif camera.matrix is not None:
+        m = np.asarray(camera.matrix, dtype=np.float64)
+        left, top, ahead = (_vec(m[:3, i]) for i in range(3))
+        o = eye - sx * left + (sy / aspect) * top + camera.near_clip * ahead
+        d = dr.normalize(ahead) + dr.zeros(jit.Array3f, dr.width(film_x))
+        tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))
     else:
         half = camera.width / 2
         if faults.on("ortho-width-as-half"):

@@ -645,7 +645,8 @@ class Geometry:
             members = of(kind)
             if members:
                 add(make(members), members)
-        for mesh in of(Mesh):  # one material and one emitter for all its triangles
+        # one material and one emitter for all its triangles (cubes too)
+        for mesh in [s for s in shapes if isinstance(s, Mesh)]:
             block = _MeshBlock(mesh)
             block.base = sum(b.count for b in self.blocks)
             self.blocks.append(block)

@@ -36,6 +36,11 @@ Heckbert's DEPTH exactly for the classic model (:mod:`tracer.emitters.base`).
 Rays of the last segment are traced only if they can add light there (an
 area light, or a background that is not a hit term).
 
+Pixel samples sit at the centres of n x n strata, or at random inside them
+with the film's ``jitter``; with the box filter a pixel is the mean of its
+own samples, with the gaussian filter every sample is splatted onto the
+pixels within the filter's radius (:func:`splat_gaussian`).
+
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
 that grows beyond the chunk size is split and processed depth-first.
 """
@@ -56,7 +61,7 @@ from tracer.emitters import area, scene_emitters
 from tracer.geometry import Geometry, Hit, spawn_offset
 from tracer.materials.base import ShadingPoint
 from tracer.materials.dispatch import SceneMaterials
-from tracer.sampling import light_sample, pixel_samples, seed32
+from tracer.sampling import jitter_2d, light_sample, pixel_samples, seed32
 from tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
@@ -320,6 +325,7 @@ class Integrator:
         per_chunk = max(1, self.chunk_samples // spp)
         image = np.zeros((total, 3), dtype=np.float32)
         second = np.zeros((total, 3), dtype=np.float32) if moments else None
+        splat = None if scene.film.filter == "box" else _Splat(scene.film)
         rays = [0] * max_depth
         shadow = [0] * max_depth
         significant = [0] * max_depth
@@ -327,6 +333,9 @@ class Integrator:
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
             pixel, s, fx, fy = pixel_samples(W, n, first, count)
+            if scene.film.jitter:  # a uniform position inside each stratum
+                u = jitter_2d(pixel, s, self.seed)
+                fx, fy = fx + (u.x - 0.5) * (1.0 / n), fy + (u.y - 0.5) * (1.0 / n)
             o, d, tmax = generate_rays(scene.camera, W, H, fx, fy)
             L = dr.zeros(jit.Array3f, count * spp)
             slot = dr.arange(jit.UInt32, count * spp)
@@ -345,22 +354,91 @@ class Integrator:
                 if nxt is not None and depth < max_depth:
                     for part in reversed(nxt.split(self.chunk_samples)):
                         stack.append((depth + 1, part))
+            if splat is not None:
+                splat.add(L.numpy().T, fx.numpy(), fy.numpy())
+                if progress is not None:
+                    progress(first + count, total)
+                continue
             px = dr.block_sum(L, spp) * (1.0 / spp)
             image[first:first + count] = px.numpy().T
             if second is not None:
                 second[first:first + count] = (dr.block_sum(L * L, spp) * (1.0 / spp)).numpy().T
             if progress is not None:
                 progress(first + count, total)
+        variance = None
+        if splat is not None:
+            image, variance = splat.image(moments)
         seconds = time.perf_counter() - start
         while rays and rays[-1] == 0:
             rays.pop()
-        variance = None
-        if second is not None:
+        if second is not None and splat is None:
             variance = (np.maximum(second - image.astype(np.float64) ** 2, 0) / spp)
             variance = variance.astype(np.float32).reshape(H, W, 3)
         return RenderResult(image.reshape(H, W, 3), spp, seconds, rays,
                             shadow[:len(rays)] if rays else [], significant[:len(rays)],
                             variance)
+
+
+def gaussian_weight(d: np.ndarray, stddev: float) -> np.ndarray:
+    """Mitsuba's ``gaussian`` reconstruction filter at offsets d (pixels), one axis.
+
+    exp(-d^2 / (2 stddev^2)) - exp(-r^2 / (2 stddev^2)) for |d| < r = 4 stddev,
+    else 0: the Gaussian lowered so that it reaches zero at the radius (Mitsuba 3,
+    ``src/rfilters/gaussian.cpp``; pbrt-v4 8.8.3 uses the same shift). Weights of
+    a pixel are the product of the two axes' weights.
+    """
+    r = 4 * stddev
+    alpha = -1 / (2 * stddev * stddev)
+    w = np.exp(alpha * d * d) - np.exp(alpha * r * r)
+    return np.where(np.abs(d) < r, np.maximum(w, 0), 0.0)
+
+
+class _Splat:
+    """Sums of weighted samples and of weights per pixel, for a filter wider than a pixel.
+
+    A pixel's value is sum(w L) / sum(w) over the samples within the radius, as
+    Mitsuba's ``hdrfilm`` develops its image block (samples only inside the film:
+    ``sample_border = false``). Variance (``moments``) is that of a weighted mean of
+    independent samples: (E_w[L^2] - E_w[L]^2) sum(w^2) / sum(w)^2.
+    """
+
+    def __init__(self, film):
+        self.W, self.H, self.stddev = film.width, film.height, film.stddev
+        self.reach = int(np.ceil(film.filter_radius))
+        n = self.W * self.H
+        self.sum_wl = np.zeros((n, 3))
+        self.sum_wl2 = np.zeros((n, 3))
+        self.sum_w = np.zeros(n)
+        self.sum_w2 = np.zeros(n)
+
+    def add(self, L: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> None:
+        L = L.astype(np.float64)
+        bx, by = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
+        n = self.W * self.H
+        for oy in range(-self.reach, self.reach + 1):
+            iy = by + oy
+            wy = gaussian_weight(fy - (iy + 0.5), self.stddev)
+            for ox in range(-self.reach, self.reach + 1):
+                ix = bx + ox
+                w = gaussian_weight(fx - (ix + 0.5), self.stddev) * wy
+                ok = (ix >= 0) & (ix < self.W) & (iy >= 0) & (iy < self.H) & (w > 0)
+                idx, wk = (iy * self.W + ix)[ok], w[ok]
+                self.sum_w += np.bincount(idx, wk, n)
+                self.sum_w2 += np.bincount(idx, wk * wk, n)
+                for c in range(3):
+                    self.sum_wl[:, c] += np.bincount(idx, wk * L[ok, c], n)
+                    self.sum_wl2[:, c] += np.bincount(idx, wk * L[ok, c] ** 2, n)
+
+    def image(self, moments: bool):
+        w = np.maximum(self.sum_w, 1e-300)[:, None]
+        mean = self.sum_wl / w
+        shape = (self.H, self.W, 3)
+        variance = None
+        if moments:
+            spread = np.maximum(self.sum_wl2 / w - mean ** 2, 0)
+            variance = (spread * (self.sum_w2[:, None] / (w * w))).astype(np.float32)
+            variance = variance.reshape(shape)
+        return mean.astype(np.float32).reshape(shape), variance
 
 
 def material_ids(scene: Scene) -> np.ndarray:

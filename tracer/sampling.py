@@ -112,6 +112,15 @@ def stratified_2d(pixel, s, n: int, dimension: int):
     return jit.Array2f((jit.Float(cx) + uniform(h1)) * inv, (jit.Float(cy) + uniform(h2)) * inv)
 
 
+def jitter_2d(pixel, s, seed: int):
+    """A uniform 2D point in [0, 1)^2 per (pixel, sample, seed): where a jittered pixel
+    sample sits inside its stratum (independent of the light samples' streams)."""
+    key = pcg_hash(pixel * 0x27D4EB2D ^ pcg_hash(jit.UInt32(seed) + 0x165667B1))
+    h1 = pcg_hash(key ^ (s * 0x85EBCA6B + 0x3C6EF372))
+    h2 = pcg_hash(h1 + 0x632BE5AB)
+    return jit.Array2f(uniform(h1), uniform(h2))
+
+
 def light_sample(pixel, s, n: int, seed: int, depth: int, light: int):
     """The 2D sample of area light ``light`` for sample ``s`` of ``pixel`` at level ``depth``.
 

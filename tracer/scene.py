@@ -65,6 +65,19 @@ class Film:
     height: int = 240
     spp: int = 16
     max_depth: int = 6
+    #: pixel filter: "box" (each sample counts for its own pixel) or "gaussian" (Mitsuba's
+    #: ``gaussian`` rfilter: weights exp(-d^2 / 2 stddev^2) - exp(-r^2 / 2 stddev^2) within
+    #: the radius r = 4 stddev, normalised over the weights a pixel receives)
+    filter: str = "box"
+    stddev: float = 0.5
+    #: samples at random inside their strata (Mitsuba's ``stratified`` with ``jitter``)
+    #: instead of at the strata centres
+    jitter: bool = False
+
+    @property
+    def filter_radius(self) -> float:
+        """Radius of the pixel filter in pixels: 0.5 for the box, 4 stddev for the gaussian."""
+        return 0.5 if self.filter == "box" else 4 * self.stddev
 
     @property
     def depth(self) -> int:
@@ -91,9 +104,41 @@ class Camera:
     #: where each pixel's grid of samples sits, in pixels from its usual place: (-0.5, -0.5)
     #: puts a single sample on the pixel's upper-left corner, as Heckbert's minray does
     pixel_offset: tuple[float, float] = (0.0, 0.0)
+    #: which extent of the film ``fov`` spans (Mitsuba's ``fov_axis``): "x" (horizontal,
+    #: the default), "y", "diagonal", "smaller" or "larger"
+    fov_axis: str = "x"
+    #: Mitsuba's ``principal_point_offset_x/y``: the optical axis moved by these fractions
+    #: of the film's width and height (perspective)
+    principal_point: tuple[float, float] = (0.0, 0.0)
+    #: the camera-to-world matrix when ``to_world`` was given instead of origin/target/up
+    #: (origin, target and up are then read from it)
+    matrix: Matrix | None = None
 
     def to_world(self) -> np.ndarray:
+        if self.matrix is not None:
+            return np.asarray(self.matrix, dtype=np.float64)
         return tf.look_at(self.origin, self.target, self.up)
+
+    def fov_x(self, aspect: float) -> float:
+        """The horizontal field of view in degrees for a film of this aspect (width / height).
+
+        Mitsuba's conversion of ``fov`` along ``fov_axis`` (``parse_fov`` in its
+        ``sensor.h``): the image plane at distance 1 spans 2 tan(fov_x / 2) across
+        and 2 tan(fov_x / 2) / aspect down, so a vertical fov_y gives
+        tan(fov_x / 2) = aspect tan(fov_y / 2), and a diagonal one
+        tan(fov_x / 2) = tan(fov_d / 2) / sqrt(1 + 1 / aspect^2).
+        """
+        axis = self.fov_axis
+        if axis == "smaller":
+            axis = "y" if aspect > 1 else "x"
+        elif axis == "larger":
+            axis = "x" if aspect > 1 else "y"
+        t = math.tan(math.radians(self.fov) / 2)
+        if axis == "y":
+            t *= aspect
+        elif axis == "diagonal":
+            t /= math.sqrt(1 + 1 / (aspect * aspect))
+        return math.degrees(2 * math.atan(t))
 
 
 # Materials and lights: one module per kind (tracer/materials/, tracer/emitters/), found
@@ -218,6 +263,32 @@ class Instance:
     emitter: AreaEmitter | None = None
 
 
+@dataclass(frozen=True, eq=False)
+class Cube(Mesh):
+    """Mitsuba's ``cube``: [-1, 1]^3 as 12 flat triangles, placed by ``to_world``."""
+
+
+def cube_mesh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(vertices, faces, uvs) of [-1, 1]^3: four vertices a face, faces wound outwards.
+
+    The same surface as Mitsuba's ``cube`` (a mesh of 24 vertices and 12 triangles
+    with face normals); each face's uv spans [0, 1]^2.
+    """
+    verts, faces, uvs = [], [], []
+    for axis in range(3):
+        for sign in (-1.0, 1.0):
+            u_ax, v_ax = (axis + 1) % 3, (axis + 2) % 3
+            base = len(verts)
+            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
+                p = [0.0, 0.0, 0.0]
+                p[axis], p[u_ax], p[v_ax] = sign, a * sign, b
+                verts.append(p)
+                uvs.append(((a + 1) / 2, (b + 1) / 2))
+            # (u x v) = +axis; flipping u on the negative face keeps the winding outward
+            faces += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
+    return np.asarray(verts), np.asarray(faces), np.asarray(uvs)
+
+
 Shape = (Sphere | Rectangle | Triangle | Disk | Cylinder | Paraboloid | Polygon | Mesh
          | Instance)
 
@@ -244,6 +315,9 @@ class Scene:
     tracer_only: tuple[str, ...] = ()
     #: named groups of shapes for ``instance`` shapes (object space)
     groups: dict[str, tuple] = field(default_factory=dict)
+    #: imported from Mitsuba XML with parts outside the Whitted subset replaced by their
+    #: nearest equivalents (``--approximate``)
+    approximate: bool = False
 
     @property
     def name(self) -> str:
@@ -646,7 +720,7 @@ def _check_transform(t: _Table, key: str, m: np.ndarray, what: str = "transform"
 
 
 SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
-               "mesh", "instance")
+               "mesh", "cube", "instance")
 #: Material ``type``s: the registry of tracer/materials/.
 MATERIAL_TYPES = tuple(_materials.REGISTRY)
 #: Shapes that may carry an area emitter (the tracer samples them): tracer/emitters/area.py.
@@ -654,6 +728,10 @@ EMITTER_SHAPES = tuple(_area.SAMPLERS)
 #: ``[[lights]]`` ``type``s: the registry of tracer/emitters/.
 LIGHT_TYPES = tuple(_emitters.LIGHTS)
 CAMERA_TYPES = ("perspective", "orthographic")
+#: ``fov_axis`` values (Mitsuba's): which extent of the film ``fov`` spans.
+FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
+#: ``[film] filter`` values: Mitsuba's ``box`` and ``gaussian`` reconstruction filters.
+FILTERS = ("box", "gaussian")
 TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare",
              "groups")
 #: Features a scene may declare tracer-only: Mitsuba has no counterpart (each kind
@@ -728,6 +806,24 @@ def load_scene(path: str | Path) -> Scene:
     return parse_scene(data, path)
 
 
+def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
+    """A TOML scene, or a Mitsuba 3 XML scene (``.xml``) read without Mitsuba.
+
+    XML is mapped onto the scene format by :func:`tracer.mitsuba_xml.read_xml`;
+    ``approximate`` replaces what lies outside the Whitted subset by its nearest
+    equivalent, calling ``warn(line)`` once per kind of substitution.
+    """
+    if str(path).lower().endswith(".xml"):
+        from tracer.mitsuba_xml import read_xml
+
+        imp = read_xml(path, approximate)
+        for line in imp.warnings:
+            if warn is not None:
+                warn(line)
+        return replace(parse_scene(imp.data, str(path)), approximate=imp.approximate)
+    return load_scene(path)
+
+
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     """Validate an already parsed TOML document (see :func:`load_scene`)."""
     _check_nesting(path, data)
@@ -790,35 +886,78 @@ def _parse_film(t: _Table) -> Film:
         max_depth = t.integer("depth", lo=1) + 1
     else:
         max_depth = t.integer("max_depth", d.max_depth, lo=1)
+    flt = t.string("filter", d.filter, FILTERS)
+    stddev = d.stddev
+    if flt == "gaussian":
+        stddev = t.number("stddev", d.stddev, lo=0, lo_open=True, hi=4)
+    elif t.has("stddev"):
+        t.fail("stddev", 'stddev is for filter = "gaussian"')
+    jitter = t.raw("jitter", d.jitter)
+    if not isinstance(jitter, bool):
+        t.fail("jitter", f"expected true or false, got {_show(jitter)}")
     film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
-                spp=t.integer("spp", d.spp, lo=1), max_depth=max_depth)
+                spp=t.integer("spp", d.spp, lo=1), max_depth=max_depth, filter=flt,
+                stddev=stddev, jitter=jitter)
     t.finish()
     return film
 
 
 def _parse_camera(t: _Table) -> Camera:
     kind = t.string("type", "perspective", CAMERA_TYPES)
-    origin, target = t.vec3("origin"), t.vec3("target")
-    up = t.vec3("up", [0.0, 1.0, 0.0], nonzero=True)
-    forward = _distinct(t, "target", origin, target, "camera.origin")
-    f_unit, up_unit = forward / _norm(forward), np.asarray(up) / _norm(up)
-    if np.linalg.norm(np.cross(f_unit, up_unit)) <= 1e-6:
-        t.fail("up", "expected a direction not parallel to target - origin")
+    matrix = None
+    if t.has("to_world"):
+        given = [k for k in ("origin", "target", "up") if t.has(k)]
+        if given:
+            t.fail(given[0], "give either to_world or origin/target/up, not both")
+        m = _parse_steps(t, "to_world")
+        if kind == "perspective" and not _orthonormal(m[:3, :3]):
+            t.fail("to_world", "a perspective camera's to_world may rotate, mirror and "
+                               "translate, not scale or shear (its rays would not be unit)")
+        matrix = _as_tuple(m)
+        origin = tuple(float(x) for x in m[:3, 3])
+        f = m[:3, 2] / _norm(m[:3, 2])
+        target = tuple(float(x) for x in m[:3, 3] + f)
+        up = tuple(float(x) for x in m[:3, 1] / _norm(m[:3, 1]))
+    else:
+        if not t.has("origin"):
+            t.fail("origin", "missing; expected a list of 3 numbers (or give to_world instead "
+                             "of origin/target/up)")
+        origin, target = t.vec3("origin"), t.vec3("target")
+        up = t.vec3("up", [0.0, 1.0, 0.0], nonzero=True)
+        forward = _distinct(t, "target", origin, target, "camera.origin")
+        f_unit, up_unit = forward / _norm(forward), np.asarray(up) / _norm(up)
+        if np.linalg.norm(np.cross(f_unit, up_unit)) <= 1e-6:
+            t.fail("up", "expected a direction not parallel to target - origin")
     near = t.number("near_clip", 1e-2, lo=0, lo_open=True)
     far = t.number("far_clip", 1e4, lo=near, lo_open=True)
     offset = _pixel_offset(t)
     if kind == "perspective":
-        cam = Camera("perspective", origin, target, up,
-                     fov=t.number("fov", 45.0, lo=0, hi=180, lo_open=True, hi_open=True),
-                     near_clip=near, far_clip=far, pixel_offset=offset)
+        fov = t.number("fov", 45.0, lo=0, hi=180, lo_open=True, hi_open=True)
+        axis = t.string("fov_axis", "x", FOV_AXES)
+        ppo = (t.number("principal_point_offset_x", 0.0, lo=-1, hi=1),
+               t.number("principal_point_offset_y", 0.0, lo=-1, hi=1))
+        cam = Camera("perspective", origin, target, up, fov=fov, near_clip=near, far_clip=far,
+                     pixel_offset=offset, fov_axis=axis, principal_point=ppo, matrix=matrix)
         note = " (width is for orthographic cameras)" if t.has("width") else ""
     else:
-        cam = Camera("orthographic", origin, target, up,
-                     width=t.number("width", lo=0, lo_open=True), near_clip=near, far_clip=far,
-                     pixel_offset=offset)
-        note = " (fov is for perspective cameras)" if t.has("fov") else ""
+        if matrix is not None:  # the view is [-1, 1]^2 in camera space, scaled by to_world
+            if t.has("width"):
+                t.fail("width", "give either width or a to_world that scales the view, not both")
+            width = 2 * _norm(np.asarray(matrix)[:3, 0])
+        else:
+            width = t.number("width", lo=0, lo_open=True)
+        cam = Camera("orthographic", origin, target, up, width=width, near_clip=near,
+                     far_clip=far, pixel_offset=offset, matrix=matrix)
+        note = (" (fov, fov_axis and principal_point_offset_x/y are for perspective cameras)"
+                if any(t.has(k) for k in ("fov", "fov_axis", "principal_point_offset_x",
+                                          "principal_point_offset_y")) else "")
     t.finish(note)
     return cam
+
+
+def _orthonormal(a: np.ndarray, tol: float = 1e-5) -> bool:
+    """The columns are unit and at right angles (a rotation, perhaps with a mirror)."""
+    return bool(np.allclose(a.T @ a, np.eye(3), atol=tol))
 
 
 def _pixel_offset(t: _Table) -> tuple[float, float]:
@@ -866,10 +1005,13 @@ STEPS = ("translate", "scale", "rotate", "matrix")
 
 
 def _parse_steps(t: _Table, key: str) -> np.ndarray:
-    mats = t.tables(key, _parse_step,
-                    "a list of steps like [{ translate = [x, y, z] }]",
-                    "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
-                    "{ matrix = [[..] x4] }")
+    if t.is_table(key):  # one step given as a table: { matrix = [...] }
+        mats = [_parse_step(t.table(key))]
+    else:
+        mats = t.tables(key, _parse_step,
+                        "a list of steps like [{ translate = [x, y, z] }]",
+                        "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
+                        "{ matrix = [[..] x4] }")
     m = tf.compose(mats)
     _check_transform(t, key, m)
     return m
@@ -896,11 +1038,15 @@ def _parse_step(s: _Table) -> np.ndarray:
         r.finish()
     else:
         row = {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4}
-        v = s.raw("matrix", ..., "4 rows of 4 numbers",
-                  {"type": "array", "items": row, "minItems": 4, "maxItems": 4})
+        v = s.raw("matrix", ..., "4 rows of 4 numbers (or 16 numbers, row by row)",
+                  {"anyOf": [{"type": "array", "items": row, "minItems": 4, "maxItems": 4},
+                             {"type": "array", "items": {"type": "number"},
+                              "minItems": 16, "maxItems": 16}]})
+        if isinstance(v, list) and len(v) == 16 and not any(isinstance(x, list) for x in v):
+            v = [v[0:4], v[4:8], v[8:12], v[12:16]]  # 16 numbers, row by row (Mitsuba's)
         if (not isinstance(v, list) or len(v) != 4 or
                 any(not isinstance(row, list) or len(row) != 4 for row in v)):
-            s.fail("matrix", "expected 4 rows of 4 numbers")
+            s.fail("matrix", "expected 4 rows of 4 numbers (or 16 numbers, row by row)")
         flat = [x for row in v for x in row]
         if any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
                for x in flat):
@@ -992,6 +1138,11 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
                          "shape (a, b and height against each other)")
     elif kind == "mesh":
         shape = _parse_mesh(t, m, material, emitter, base)
+    elif kind == "cube":
+        verts, faces, uvs = cube_mesh()
+        world = tf.apply_point(m, verts)
+        _check_extent(t, "to_world", world, "vertices")
+        shape = Cube("cube", False, world, faces, None, uvs, _as_tuple(m), material, emitter)
     else:
         shape = Instance(group, _as_tuple(m))
     if material is not None:  # a material may make a light of its shape (light_of)

@@ -1,0 +1,905 @@
+"""Mitsuba 3 scene XML read into the scene format, without Mitsuba.
+
+:func:`read_xml` parses a Mitsuba scene file with Python's expat (keeping each
+element's line for messages), resolves what Mitsuba's own parser resolves
+before it builds plugins, and maps the plugins onto the scene format's keys:
+
+* ``<default name value>`` and ``$name`` in any attribute (values given to
+  :func:`read_xml` win over the file's defaults, as ``mi.load_file(path,
+  name=value)`` does);
+* ``<include filename>`` (its scene's children spliced in place), ``<path
+  value>`` (a folder searched for files, relative to the scene), ``<ref id>``
+  and objects declared once with an ``id`` and used by reference;
+* ``<transform>`` with ``translate``, ``rotate``, ``scale``, ``matrix`` and
+  ``lookat`` in Mitsuba's order: each step applies after the ones above it,
+  which is the order of a ``to_world`` list of steps (first step first);
+* ``rgb`` values as given (the tracer is RGB), ``spectrum`` values that are
+  one number as a grey colour; spectra given per wavelength are spectral-only
+  input (refused; ``approximate`` averages them);
+* named indices of refraction (:mod:`tracer.mitsuba_ior`) as numbers.
+
+The result is a TOML document as a dictionary (:class:`Imported`), plus a note
+for every place where something was approximated, keyed by the document's
+path ("camera", "materials.glass", "shapes[2]"). ``whitted import`` writes it
+with the notes as comments; ``whitted render scene.xml`` parses it directly.
+
+Elements outside the subset the tracer renders (rough BSDFs, media,
+spectral-only inputs, other sensors, ...) raise :class:`XMLImportError`
+naming the element and its line; with ``approximate=True`` those that have a
+nearest smooth equivalent (rough conductor -> conductor, and so on) are
+mapped onto it, each substitution reported once in :attr:`Imported.warnings`.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+import xml.parsers.expat
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from tracer import transform as tf
+from tracer.errors import UserError
+from tracer.mitsuba_ior import IOR
+
+
+class XMLImportError(UserError):
+    """A Mitsuba XML scene outside the subset, or malformed; names the file, line and element."""
+
+
+@dataclass
+class Node:
+    tag: str
+    attrs: dict
+    children: list
+    line: int
+    file: str
+
+    @property
+    def type(self) -> str:
+        return self.attrs.get("type", "")
+
+    def where(self) -> str:
+        t = f' type="{self.type}"' if self.type else ""
+        return f"{self.file}:{self.line}: <{self.tag}{t}>"
+
+
+@dataclass
+class Imported:
+    """A scene read from Mitsuba XML: the TOML document, and what was approximated."""
+    data: dict
+    #: TOML path ("camera", "shapes[3]", "materials.glass") -> notes on approximations
+    notes: dict = field(default_factory=dict)
+    #: one line per kind of substitution made under ``approximate`` (outside the subset)
+    warnings: list = field(default_factory=list)
+
+    @property
+    def approximate(self) -> bool:
+        """Something outside the Whitted subset was replaced by its nearest equivalent."""
+        return bool(self.warnings)
+
+
+# ---------------------------------------------------------------- parsing
+
+
+def _parse_file(path: Path) -> Node:
+    """The XML file as a tree of Nodes with line numbers (expat, no entities fetched)."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise XMLImportError(f"{path}: no such file") from None
+    except IsADirectoryError:
+        raise XMLImportError(f"{path}: is a directory, expected a Mitsuba .xml scene") from None
+    parser = xml.parsers.expat.ParserCreate()
+    root = Node("#document", {}, [], 0, str(path))
+    stack = [root]
+
+    def start(tag, attrs):
+        node = Node(tag, dict(attrs), [], parser.CurrentLineNumber, str(path))
+        stack[-1].children.append(node)
+        stack.append(node)
+
+    def end(tag):
+        stack.pop()
+
+    parser.StartElementHandler = start
+    parser.EndElementHandler = end
+    # Refuse DTDs and entities: a scene needs neither (and they can expand without bound).
+    parser.SetParamEntityParsing(xml.parsers.expat.XML_PARAM_ENTITY_PARSING_NEVER)
+
+    def no_entities(*_):
+        raise XMLImportError(f"{path}: XML entity declarations are not accepted in a scene")
+
+    parser.EntityDeclHandler = no_entities
+    try:
+        parser.Parse(data, True)
+    except xml.parsers.expat.ExpatError as e:
+        raise XMLImportError(f"{path}:{e.lineno}: not well-formed XML "
+                             f"({xml.parsers.expat.ErrorString(e.code)})") from None
+    if len(root.children) != 1 or root.children[0].tag != "scene":
+        raise XMLImportError(f"{path}: expected a Mitsuba scene (<scene version=...>) as the "
+                             "root element")
+    return root.children[0]
+
+
+_PARAM = re.compile(r"\$([A-Za-z_][A-Za-z0-9_]*)")
+
+
+class _Resolver:
+    """default/$param substitution, include, path and id lookup, as Mitsuba's parser does."""
+
+    def __init__(self, path: Path, params: dict):
+        self.root_dir = path.resolve().parent
+        self.search = [self.root_dir]
+        self.params = dict(params)
+        self.ids: dict[str, Node] = {}
+        self.depth = 0
+
+    def substitute(self, node: Node) -> None:
+        for k, v in node.attrs.items():
+            def repl(m, node=node):
+                if m.group(1) not in self.params:
+                    raise XMLImportError(f"{node.where()}: ${m.group(1)} has no value (no "
+                                         f"<default name=\"{m.group(1)}\"> and none given)")
+                return str(self.params[m.group(1)])
+            node.attrs[k] = _PARAM.sub(repl, v)
+
+    def expand(self, node: Node) -> list[Node]:
+        """The node's children with defaults applied, includes spliced, ids recorded."""
+        out = []
+        for child in node.children:
+            if child.tag == "default":
+                name, value = child.attrs.get("name"), child.attrs.get("value")
+                if name is None or value is None:
+                    raise XMLImportError(f"{child.where()}: expected name and value")
+                self.params.setdefault(name, value)
+                continue
+            self.substitute(child)
+            if child.tag == "path":
+                self.search.insert(0, (self.root_dir / child.attrs.get("value", "")).resolve())
+                continue
+            if child.tag == "include":
+                out += self._include(child)
+                continue
+            child.children = self.expand(child)
+            if "id" in child.attrs and child.tag not in ("ref", "alias"):
+                self.ids[child.attrs["id"]] = child
+            if child.tag == "alias":
+                if child.attrs.get("id") not in self.ids or "as" not in child.attrs:
+                    raise XMLImportError(f"{child.where()}: expected id (of an object "
+                                         "declared above) and as")
+                self.ids[child.attrs["as"]] = self.ids[child.attrs["id"]]
+                continue
+            out.append(child)
+        return out
+
+    def _include(self, node: Node) -> list[Node]:
+        self.depth += 1
+        if self.depth > 16:
+            raise XMLImportError(f"{node.where()}: includes nested more than 16 deep")
+        path = self.find(node, node.attrs.get("filename", ""))
+        scene = _parse_file(path)
+        kids = self.expand(scene)
+        self.depth -= 1
+        return kids
+
+    def find(self, node: Node, name: str) -> Path:
+        """A file named in the scene: absolute, or in a folder of <path> or the scene's."""
+        p = Path(name)
+        if p.is_absolute():
+            return p
+        for d in self.search:
+            if (d / p).exists():
+                return d / p
+        raise XMLImportError(f"{node.where()}: file {name!r} not found (searched "
+                             + ", ".join(str(d) for d in self.search) + ")")
+
+    def deref(self, node: Node) -> Node:
+        if node.tag != "ref":
+            return node
+        target = self.ids.get(node.attrs.get("id", ""))
+        if target is None:
+            raise XMLImportError(f"{node.where()}: no object with id {node.attrs.get('id')!r}")
+        return target
+
+
+# ---------------------------------------------------------------- values
+
+
+def _floats(node: Node, text: str, n: int | None = None) -> list[float]:
+    try:
+        vals = [float(x) for x in re.split(r"[,\s]+", text.strip()) if x]
+    except ValueError:
+        raise XMLImportError(f"{node.where()}: expected numbers, got {text!r}") from None
+    if n is not None and len(vals) != n:
+        raise XMLImportError(f"{node.where()}: expected {n} numbers, got {text!r}")
+    return vals
+
+
+def _xyz(node: Node, default: float = 0.0) -> list[float]:
+    """A point or vector: value="x, y, z", or x= y= z= attributes (missing ones default)."""
+    if "value" in node.attrs:
+        v = _floats(node, node.attrs["value"])
+        return v * 3 if len(v) == 1 else _check_len(node, v, 3)
+    return [float(node.attrs.get(k, default)) for k in "xyz"]
+
+
+def _check_len(node: Node, v: list, n: int) -> list:
+    if len(v) != n:
+        raise XMLImportError(f"{node.where()}: expected {n} numbers, got {len(v)}")
+    return v
+
+
+def transform_matrix(node: Node) -> np.ndarray:
+    """A ``<transform>`` element as a 4x4 matrix: its steps applied first to last."""
+    steps = []
+    for s in node.children:
+        if s.tag == "translate":
+            steps.append(tf.translate(_xyz(s)))
+        elif s.tag == "scale":
+            if "value" in s.attrs:
+                steps.append(tf.scale(_xyz(s)))
+            else:
+                steps.append(tf.scale([float(s.attrs.get(k, 1.0)) for k in "xyz"]))
+        elif s.tag == "rotate":
+            axis = _xyz(s) if "value" in s.attrs else [float(s.attrs.get(k, 0)) for k in "xyz"]
+            if not any(axis):
+                raise XMLImportError(f"{s.where()}: a rotation needs a non-zero axis")
+            steps.append(tf.rotate(axis, float(s.attrs.get("angle", 0))))
+        elif s.tag == "matrix":
+            v = _floats(s, s.attrs.get("value", ""))
+            if len(v) == 9:  # a 3x3 matrix (Mitsuba accepts it for to_uv)
+                m = np.eye(4)
+                m[:3, :3] = np.reshape(v, (3, 3))
+            else:
+                m = np.reshape(_check_len(s, v, 16), (4, 4))
+            steps.append(m)
+        elif s.tag == "lookat":
+            origin = _floats(s, s.attrs.get("origin", ""), 3)
+            target = _floats(s, s.attrs.get("target", ""), 3)
+            up = _floats(s, s.attrs.get("up", "0, 1, 0"), 3)
+            if np.allclose(origin, target):
+                raise XMLImportError(f"{s.where()}: origin and target are the same point")
+            steps.append(tf.look_at(origin, target, up))
+        else:
+            raise XMLImportError(f"{s.where()}: unknown transform step (expected translate, "
+                                 "rotate, scale, matrix or lookat)")
+    return tf.compose(steps)
+
+
+# ---------------------------------------------------------------- the importer
+
+
+#: BSDFs outside the subset -> (nearest smooth kind, what is lost): used with ``approximate``.
+APPROXIMATIONS = {
+    "roughconductor": ("conductor", "its roughness (a smooth conductor instead)"),
+    "roughdielectric": ("dielectric", "its roughness (a smooth dielectric instead)"),
+    "roughplastic": ("plastic", "its roughness (a smooth plastic instead)"),
+    "principled": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
+    "principledthin": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
+    "blendbsdf": ("diffuse", "the blend (its first BSDF's diffuse colour, or grey)"),
+    "bumpmap": ("inner", "the bump map (the BSDF it wraps instead)"),
+    "normalmap": ("inner", "the normal map (the BSDF it wraps instead)"),
+}
+
+
+#: Mitsuba BSDF plugin -> the importer's method that maps it (one line per plugin).
+BSDFS = {
+    "twosided": "_twosided",
+    "mask": "_mask",
+    "diffuse": "_diffuse",
+    "dielectric": "_dielectric",
+    "thindielectric": "_thindielectric",
+    "conductor": "_conductor",
+    "plastic": "_plastic",
+    "whitted_phong": "_whitted_phong",
+}
+
+#: Mitsuba emitter plugin (outside shapes) -> the importer's method that maps it.
+LIGHTS = {
+    "point": "_point",
+    "spot": "_spot",
+    "directional": "_directional",
+    "constant": "_constant",
+    "envmap": "_envmap",
+    "whitted_background": "_whitted_background",
+}
+
+
+class _Importer:
+    def __init__(self, path: Path, approximate: bool, params: dict, convert=None):
+        self.convert = convert
+        self.path = path
+        self.approximate = approximate
+        self.res = _Resolver(path, params)
+        self.out: dict = {"film": {}, "camera": {}, "materials": {}, "lights": [],
+                          "shapes": []}
+        self.notes: dict[str, list[str]] = {}
+        self.warnings: list[str] = []
+        self._warned: set[str] = set()
+        self.material_ids: dict[int, str] = {}   # id(bsdf node) -> material name
+        self.groups: dict[str, list] = {}
+
+    # -------------------------------------------------------------- helpers
+
+    def note(self, where: str, text: str) -> None:
+        lst = self.notes.setdefault(where, [])
+        if text not in lst:
+            lst.append(text)
+
+    def outside(self, node: Node, what: str, nearest: str | None, where: str) -> None:
+        """Refuse an element outside the subset, or note its substitute under ``approximate``."""
+        if not self.approximate or nearest is None:
+            hint = f"; --approximate maps it to {nearest}" if nearest else ""
+            raise XMLImportError(f"{node.where()}: {what} is outside what the Whitted tracer "
+                                 f"renders{hint}")
+        key = f"{node.tag} {node.type} -> {nearest}"
+        if key not in self._warned:
+            self._warned.add(key)
+            self.warnings.append(f"{node.where()}: {what} approximated by {nearest} "
+                                 "(further ones alike not repeated)")
+        self.note(where, f"approximated: {what} -> {nearest} (line {node.line})")
+
+    def props(self, node: Node) -> dict:
+        """Named property children: name -> Node (objects and values alike)."""
+        out = {}
+        for c in node.children:
+            name = c.attrs.get("name")
+            if name is not None:
+                out[name] = c
+        return out
+
+    def number(self, node: Node | None, default=None):
+        if node is None:
+            return default
+        if node.tag not in ("float", "integer"):
+            raise XMLImportError(f"{node.where()}: expected <float> or <integer>")
+        return float(node.attrs.get("value", "nan")) if node.tag == "float" else \
+            int(node.attrs.get("value"))
+
+    def string(self, node: Node | None, default=None):
+        return default if node is None else node.attrs.get("value", "")
+
+    def boolean(self, node: Node | None, default=None):
+        if node is None:
+            return default
+        return node.attrs.get("value", "").strip().lower() == "true"
+
+    def color(self, node: Node | None, where: str, default=None):
+        """rgb, spectrum (one value), float, or a texture: a colour or a texture table."""
+        if node is None:
+            return default
+        node = self.res.deref(node)
+        if node.tag == "rgb":
+            vals = _floats(node, node.attrs.get("value", ""))
+            return vals * 3 if len(vals) == 1 else _check_len(node, vals, 3)
+        if node.tag in ("float", "integer"):
+            return [float(node.attrs.get("value"))] * 3
+        if node.tag == "spectrum":
+            if "filename" in node.attrs:
+                self.outside(node, "a spectrum from a file (spectral-only input)", None, where)
+            v = node.attrs.get("value", "")
+            if ":" in v:
+                pairs = [p.split(":") for p in re.split(r",\s*", v.strip()) if p]
+                vals = [float(b) for _, b in pairs]
+                self.outside(node, "a spectrum given per wavelength (spectral-only input)",
+                             "its mean over wavelengths, as a grey", where)
+                return [sum(vals) / len(vals)] * 3
+            vals = _floats(node, v)
+            return vals * 3 if len(vals) == 1 else _check_len(node, vals, 3)
+        if node.tag == "texture":
+            return self.texture(node, where)
+        raise XMLImportError(f"{node.where()}: expected a colour (rgb, spectrum, float) or a "
+                             "texture")
+
+    def texture(self, node: Node, where: str):
+        p = self.props(node)
+        if node.type == "checkerboard":
+            tex = {"color0": self.color(p.get("color0"), where, [0.4] * 3),
+                   "color1": self.color(p.get("color1"), where, [0.2] * 3)}
+            if "to_uv" in p:
+                m = transform_matrix(p["to_uv"])
+                if not np.allclose(m[:2, 2:], 0) or not np.allclose(m[:2, :2],
+                                                                     np.diag(np.diag(m[:2, :2]))):
+                    self.outside(p["to_uv"], "a to_uv that is not a scale", None, where)
+                tex["scale"] = [float(m[0, 0]), float(m[1, 1])]
+            return {"checkerboard": tex}
+        if node.type == "bitmap":
+            fname = self.string(p.get("filename"))
+            bm = {"filename": str(self.res.find(node, fname))}
+            for k in ("filter_type", "wrap_mode"):
+                if k in p:
+                    bm[k] = self.string(p[k])
+            if "raw" in p:
+                bm["raw"] = self.boolean(p["raw"])
+            return {"bitmap": bm}
+        self.outside(node, f'texture "{node.type}"', None, where)
+
+    def to_world(self, node: Node | None) -> list:
+        """A to_world as a list of steps: the XML's own translate/rotate/scale steps in its
+        order (which is the scene format's: first step first), else one matrix step."""
+        if node is None:
+            return []
+        steps = []
+        for s in node.children:
+            if s.tag == "translate":
+                steps.append({"translate": _xyz(s)})
+            elif s.tag == "scale":
+                v = _xyz(s) if "value" in s.attrs else \
+                    [float(s.attrs.get(k, 1.0)) for k in "xyz"]
+                steps.append({"scale": v[0] if len(set(v)) == 1 else v})
+            elif s.tag == "rotate":
+                axis = _xyz(s) if "value" in s.attrs else \
+                    [float(s.attrs.get(k, 0)) for k in "xyz"]
+                steps.append({"rotate": {"axis": axis, "angle": float(s.attrs.get("angle", 0))}})
+            else:
+                break
+        else:
+            return steps
+        m = transform_matrix(node)
+        return [{"matrix": [[float(x) for x in row] for row in m]}]
+
+    def ior(self, node: Node | None, default: float, where: str) -> float:
+        if node is None:
+            return default
+        if node.tag == "string":
+            name = node.attrs.get("value", "").strip().lower()
+            if name not in IOR:
+                raise XMLImportError(f"{node.where()}: unknown IOR name {name!r} (known: "
+                                     + ", ".join(IOR) + ")")
+            self.note(where, f"{node.attrs.get('name')} = \"{name}\": Mitsuba's table "
+                             f"({IOR[name]})")
+            return IOR[name]
+        return float(self.number(node))
+
+    # -------------------------------------------------------------- scene
+
+    def run(self) -> Imported:
+        scene = _parse_file(self.path)
+        self.res.substitute(scene)
+        children = self.res.expand(scene)
+        sensors = [c for c in children if c.tag == "sensor"]
+        for c in children:
+            if c.tag == "shape" and c.type == "shapegroup":
+                self.shapegroup(c)
+        for c in children:
+            if c.tag == "sensor":
+                if c is not sensors[0]:
+                    self.note("camera", f"only the first sensor is imported (line {c.line} "
+                                        "ignored)")
+                    continue
+                self.sensor(c)
+            elif c.tag == "integrator":
+                self.integrator(c)
+            elif c.tag == "emitter":
+                self.light(c)
+            elif c.tag == "shape":
+                if c.type != "shapegroup":
+                    self.shape(c, self.out["shapes"], f"shapes[{len(self.out['shapes'])}]")
+            elif c.tag in ("bsdf", "texture", "spectrum", "rgb"):
+                continue  # declared for reference; imported where used
+            elif c.tag in ("medium", "phase", "volume"):
+                self.outside(c, "a participating medium", None, "")
+            else:
+                raise XMLImportError(f"{c.where()}: unexpected element in a scene")
+        if not sensors:
+            raise XMLImportError(f"{self.path}: no <sensor>; the scene format needs a camera")
+        if "max_depth" not in self.out["film"]:
+            self.out["film"]["max_depth"] = 2
+            self.note("film", "no integrator: Mitsuba's default path tracer; Whitted's "
+                              "light at the first hit (max_depth 2)")
+        if self.groups:
+            self.out["groups"] = {k: {"shapes": v} for k, v in self.groups.items()}
+        data = {k: v for k, v in self.out.items() if v or k in ("film", "camera")}
+        data["description"] = f"Imported from Mitsuba XML {self.path.name}"
+        notes = {k: v for k, v in self.notes.items() if v}
+        return Imported(data, notes, self.warnings)
+
+    def integrator(self, node: Node) -> None:
+        p = self.props(node)
+        if node.type in ("moment", "aov"):  # wrappers: the integrator inside renders
+            inner = [c for c in node.children if c.tag == "integrator"]
+            if inner:
+                self.integrator(inner[0])
+            return
+        film = self.out["film"]
+        if node.type == "direct":
+            film["max_depth"] = 2
+        elif node.type in ("path", "whitted"):
+            depth = self.number(p.get("max_depth"), -1)
+            if depth < 0:
+                film["max_depth"] = 8
+                self.note("film", "max_depth -1 (unbounded) becomes 8 specular bounces")
+            else:
+                film["max_depth"] = max(int(depth), 1)
+            if node.type == "path" and film["max_depth"] > 2:
+                self.note("film", "Mitsuba's path integrator also follows diffuse bounces; "
+                                  "Whitted's tracer follows only specular ones")
+        else:
+            self.outside(node, f'integrator "{node.type}"', "Whitted's (max_depth as given)",
+                         "film")
+            film["max_depth"] = int(self.number(p.get("max_depth"), 2))
+
+    def sensor(self, node: Node) -> None:
+        p = self.props(node)
+        cam: dict = self.out["camera"]
+        kind = node.type
+        if kind == "thinlens":
+            self.outside(node, "a thin-lens camera (depth of field)", "a pinhole perspective",
+                         "camera")
+            kind = "perspective"
+        if kind not in ("perspective", "orthographic"):
+            self.outside(node, f'sensor "{kind}"', None, "camera")
+        cam["type"] = kind
+        film = [c for c in node.children if c.tag == "film"]
+        sampler = [c for c in node.children if c.tag == "sampler"]
+        width, height = self.film(film[0] if film else None)
+        m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        single_lookat = ("to_world" in p and len(p["to_world"].children) == 1 and
+                         p["to_world"].children[0].tag == "lookat")
+        if single_lookat:  # the common case, in the scene format's own words
+            la = p["to_world"].children[0]
+            cam["origin"] = _floats(la, la.attrs["origin"], 3)
+            cam["target"] = _floats(la, la.attrs["target"], 3)
+            cam["up"] = _floats(la, la.attrs.get("up", "0, 1, 0"), 3)
+            if kind == "orthographic":  # Mitsuba's view: [-1, 1] across, unscaled
+                cam["width"] = 2.0
+        else:
+            cam["to_world"] = [{"matrix": [[float(x) for x in row] for row in m]}]
+        for k in ("near_clip", "far_clip"):
+            if k in p:
+                cam[k] = float(self.number(p[k]))
+        if kind == "perspective":
+            if "fov" in p and "focal_length" in p:
+                raise XMLImportError(f"{node.where()}: give fov or focal_length, not both")
+            if "fov" in p:
+                cam["fov"] = float(self.number(p["fov"]))
+                cam["fov_axis"] = self.string(p.get("fov_axis"), "x").lower()
+            else:  # Mitsuba: a 35 mm film's diagonal (36 x 24 mm) at this focal length
+                text = self.string(p.get("focal_length"), "50mm")
+                f = float(text.lower().removesuffix("mm"))
+                cam["fov"] = math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * f)))
+                cam["fov_axis"] = "diagonal"
+                self.note("camera", f"focal_length {text}: the diagonal field of view of a "
+                                    "35 mm film (Mitsuba's conversion)")
+            for k in ("principal_point_offset_x", "principal_point_offset_y"):
+                if k in p:
+                    cam[k] = float(self.number(p[k]))
+        self.sampler(sampler[0] if sampler else None)
+        del width, height
+
+    def film(self, node: Node | None) -> tuple[int, int]:
+        film = self.out["film"]
+        p = self.props(node) if node is not None else {}
+        if node is not None and node.type != "hdrfilm":
+            self.outside(node, f'film "{node.type}"', "hdrfilm", "film")
+        film["width"] = int(self.number(p.get("width"), 768))
+        film["height"] = int(self.number(p.get("height"), 576))
+        for k in ("crop_width", "crop_height", "crop_offset_x", "crop_offset_y"):
+            if k in p:
+                self.outside(p[k], "a cropped film", None, "film")
+        if self.boolean(p.get("sample_border"), False):
+            self.note("film", "sample_border: samples outside the film are not taken")
+        rf = [c for c in (node.children if node is not None else []) if c.tag == "rfilter"]
+        rtype = rf[0].type if rf else "gaussian"
+        if rtype == "box":
+            film["filter"] = "box"
+        else:
+            if rtype != "gaussian":
+                self.outside(rf[0], f'pixel filter "{rtype}"', "a gaussian (stddev 0.5)",
+                             "film")
+            film["filter"] = "gaussian"
+            stddev = self.number(self.props(rf[0]).get("stddev"), 0.5) if rf and \
+                rtype == "gaussian" else 0.5
+            film["stddev"] = float(stddev)
+        return film["width"], film["height"]
+
+    def sampler(self, node: Node | None) -> None:
+        film = self.out["film"]
+        p = self.props(node) if node is not None else {}
+        count = int(self.number(p.get("sample_count"), 4))
+        n = math.isqrt(count)
+        if n * n != count:
+            n += 1
+            self.note("film", f"sample_count {count} rounded up to {n * n} ({n}x{n} strata)")
+        film["spp"] = n * n
+        kind = node.type if node is not None else "independent"
+        if kind == "stratified":
+            film["jitter"] = bool(self.boolean(p.get("jitter"), True))
+        else:
+            film["jitter"] = True
+            self.note("film", f'sampler "{kind}": jittered strata (the same expected image, '
+                              "another noise)")
+
+    # -------------------------------------------------------------- BSDFs
+
+    def material(self, node: Node, where: str) -> str:
+        """The material of a <bsdf> (or ref): its name in [materials], imported once."""
+        node = self.res.deref(node)
+        key = id(node)
+        if key in self.material_ids:
+            return self.material_ids[key]
+        base = re.sub(r"[^A-Za-z0-9_-]", "_", node.attrs.get("id", "")) or node.type
+        name, i = base, 1
+        while name in self.out["materials"]:
+            i += 1
+            name = f"{base}_{i}"
+        self.material_ids[key] = name
+        self.out["materials"][name] = self.bsdf(node, f"materials.{name}", two_sided=False)
+        return name
+
+    def bsdf(self, node: Node, where: str, two_sided: bool) -> dict:
+        """A <bsdf> as a [materials] table, through the table of Mitsuba plugins (BSDFS)."""
+        p = self.props(node)
+        kind = node.type
+        if kind in APPROXIMATIONS and APPROXIMATIONS[kind] is not None:
+            nearest, lost = APPROXIMATIONS[kind]
+            if nearest == "inner":
+                self.outside(node, f'a "{kind}" BSDF', "the BSDF it wraps", where)
+                return self.bsdf(self._inner(node), where, two_sided)
+            self.outside(node, f'a "{kind}" BSDF ({lost.split(" (")[0]} lost)',
+                         f'a smooth "{nearest}"', where)
+            if nearest == "diffuse":
+                colour = p.get("base_color") or p.get("reflectance")
+                return self._sided({"type": "diffuse",
+                                    "reflectance": self.color(colour, where, [0.5] * 3)},
+                                   two_sided)
+            kind = nearest
+        if kind not in BSDFS:
+            self.outside(node, f'a "{kind}" BSDF', None, where)
+        return getattr(self, BSDFS[kind])(node, p, where, two_sided)
+
+    def _inner(self, node: Node) -> Node:
+        inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
+        if len(inner) != 1:
+            raise XMLImportError(f"{node.where()}: expected one nested BSDF")
+        return self.res.deref(inner[0])
+
+    def _twosided(self, node, p, where, two_sided):
+        return self.bsdf(self._inner(node), where, two_sided=True)
+
+    def _mask(self, node, p, where, two_sided):
+        out = self.bsdf(self._inner(node), where, two_sided)
+        out["opacity"] = self.scalar_or_color(p.get("opacity"), where, 0.5)
+        return out
+
+    def _diffuse(self, node, p, where, two_sided):
+        return self._sided({"type": "diffuse",
+                            "reflectance": self.color(p.get("reflectance"), where, [0.5] * 3)},
+                           two_sided)
+
+    def _dielectric(self, node, p, where, two_sided):
+        for k in ("specular_reflectance", "specular_transmittance"):
+            if k in p and self.color(p[k], where) != [1.0] * 3:
+                self.outside(p[k], f"a dielectric's {k} other than 1", None, where)
+        return {"type": "dielectric", "ior": self.ior(p.get("int_ior"), 1.5046, where),
+                "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+
+    def _thindielectric(self, node, p, where, two_sided):
+        return {"type": "thindielectric", "ior": self.ior(p.get("int_ior"), 1.5046, where),
+                "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+
+    def _conductor(self, node, p, where, two_sided):
+        spec = self.color(p.get("specular_reflectance"), where, [1.0] * 3)
+        mat = self.string(p.get("material"), "none" if "eta" not in p else None)
+        if mat == "none" and "eta" not in p:
+            self.note(where, 'conductor with material "none": a perfect mirror')
+            return self._sided({"type": "mirror", "reflectance": spec}, two_sided)
+        out = {"type": "conductor"}
+        if "eta" in p:
+            out["eta"] = self.color(p["eta"], where)
+            out["k"] = self.color(p.get("k"), where, [0.0] * 3)
+        else:
+            out["material"] = mat
+        if spec != [1.0] * 3:
+            out["specular_reflectance"] = spec
+        return self._sided(out, two_sided)
+
+    def _whitted_phong(self, node, p, where, two_sided):
+        # the tracer's own Phong model, as `whitted export` writes it
+        return self._sided({"type": "phong",
+                            "diffuse": self.color(p.get("diffuse"), where, [0.5] * 3),
+                            "specular": self.color(p.get("specular"), where, [0.2] * 3),
+                            "exponent": float(self.number(p.get("exponent"), 32.0)),
+                            "model": self.string(p.get("model"), "phong")}, two_sided)
+
+    def _plastic(self, node, p, where, two_sided):
+        out = {"type": "plastic",
+               "diffuse_reflectance": self.color(p.get("diffuse_reflectance"), where,
+                                                 [0.5] * 3),
+               "specular_reflectance": self.color(p.get("specular_reflectance"), where,
+                                                  [1.0] * 3),
+               "ior": self.ior(p.get("int_ior"), 1.49, where),
+               "ext_ior": self.ior(p.get("ext_ior"), 1.000277, where)}
+        if self.boolean(p.get("nonlinear"), False):
+            out["nonlinear"] = True
+        return self._sided(out, two_sided)
+
+    def scalar_or_color(self, node, where, default):
+        v = self.color(node, where, [default] * 3)
+        return v[0] if isinstance(v, list) and len(set(v)) == 1 else v
+
+    def _sided(self, out: dict, two_sided: bool) -> dict:
+        """Mitsuba's bare BSDFs are black from behind; the scene format's default is two-sided."""
+        if not two_sided:
+            out["two_sided"] = False
+        return out
+
+    # -------------------------------------------------------------- emitters
+
+    def light(self, node: Node) -> None:
+        """An <emitter> as a [[lights]] table, through the table of Mitsuba plugins (LIGHTS)."""
+        p = self.props(node)
+        where = f"lights[{len(self.out['lights'])}]"
+        if node.type == "area":
+            raise XMLImportError(f"{node.where()}: an area emitter belongs inside a <shape>")
+        if node.type not in LIGHTS:
+            self.outside(node, f'emitter "{node.type}"', None, where)
+        m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
+        self.out["lights"].append(getattr(self, LIGHTS[node.type])(node, p, m, where))
+
+    def _point(self, node, p, m, where):
+        pos = _xyz(p["position"]) if "position" in p else list(m[:3, 3])
+        return {"type": "point", "position": [float(x) for x in pos],
+                "intensity": self.color(p.get("intensity"), where, [1.0] * 3)}
+
+    def _spot(self, node, p, m, where):
+        cutoff = float(self.number(p.get("cutoff_angle"), 20.0))
+        light = {"type": "spot",
+                 "position": [float(x) for x in tf.apply_point(m, (0, 0, 0))],
+                 "target": [float(x) for x in tf.apply_point(m, (0, 0, 1))],
+                 "intensity": self.color(p.get("intensity"), where, [1.0] * 3),
+                 "cutoff_angle": cutoff,
+                 "beam_width": float(self.number(p.get("beam_width"), cutoff * 0.75))}
+        if "texture" in p:
+            light["texture"] = self.color(p["texture"], where)
+        return light
+
+    def _directional(self, node, p, m, where):
+        d = _xyz(p["direction"]) if "direction" in p else tf.apply_vector(m, (0, 0, 1))
+        return {"type": "directional", "direction": [float(x) for x in d],
+                "irradiance": self.color(p.get("irradiance"), where, [1.0] * 3)}
+
+    def _constant(self, node, p, m, where):
+        return {"type": "constant", "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
+
+    def _envmap(self, node, p, m, where):
+        light = {"type": "envmap",
+                 "filename": str(self.res.find(node, self.string(p.get("filename"))))}
+        if "scale" in p:
+            light["scale"] = float(self.number(p["scale"]))
+        if "to_world" in p:
+            light["to_world"] = self.to_world(p["to_world"])
+        return light
+
+    def _whitted_background(self, node, p, m, where):
+        # the tracer's background, as `whitted export` writes it
+        return {"type": "background",
+                "radiance": self.color(p.get("radiance"), where, [1.0] * 3)}
+
+    # -------------------------------------------------------------- shapes
+
+    def shapegroup(self, node: Node) -> None:
+        gid = node.attrs.get("id")
+        if not gid:
+            raise XMLImportError(f"{node.where()}: a shapegroup needs an id")
+        members: list = []
+        for c in node.children:
+            if c.tag == "shape":
+                self.shape(c, members, f"groups.{gid}.shapes[{len(members)}]", in_group=True)
+        self.groups[gid] = members
+
+    def shape(self, node: Node, out: list, where: str, in_group: bool = False) -> None:
+        node = self.res.deref(node)
+        p = self.props(node)
+        kind = node.type
+        shape: dict = {}
+        if kind == "instance":
+            refs = [self.res.deref(c) for c in node.children if c.tag in ("ref", "shape")]
+            gid = refs[0].attrs.get("id") if refs else None
+            if gid not in self.groups:
+                raise XMLImportError(f"{node.where()}: an instance must reference a shapegroup")
+            shape = {"type": "instance", "group": gid}
+            shape["to_world"] = self.to_world(p.get("to_world"))
+            out.append(shape)
+            return
+        if kind == "sphere":
+            shape["type"] = "sphere"
+            if "center" in p:
+                shape["center"] = _xyz(p["center"])
+            if "radius" in p:
+                shape["radius"] = float(self.number(p["radius"]))
+        elif kind in ("rectangle", "disk", "cube"):
+            shape["type"] = kind
+        elif kind == "cylinder":
+            shape["type"] = "cylinder"
+            for k in ("p0", "p1"):
+                if k in p:
+                    shape[k] = _xyz(p[k])
+            if "radius" in p:
+                shape["radius"] = float(self.number(p["radius"]))
+        elif kind in ("obj", "ply"):
+            shape["type"] = "mesh"
+            shape["file"] = str(self.res.find(node, self.string(p.get("filename"))))
+            shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+            triangle = _single_triangle(Path(shape["file"]))
+            if triangle is not None and not shape["smooth"]:  # one flat face: a triangle
+                shape = {"type": "triangle", "vertices": triangle}
+            if self.boolean(p.get("flip_normals"), False):
+                self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
+        elif kind == "serialized" and self.convert is not None:
+            source = self.res.find(node, self.string(p.get("filename")))
+            shape["type"] = "mesh"
+            shape["file"] = str(self.convert(source, int(self.number(p.get("shape_index"), 0))))
+            shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+            self.note(where, f"serialized mesh {source.name} converted by Mitsuba to "
+                             f"{Path(shape['file']).name}")
+        elif kind == "serialized":
+            self.outside(node, "a serialized mesh (`whitted import` converts it through "
+                               "Mitsuba; render the imported TOML)", None, where)
+        else:
+            self.outside(node, f'shape "{kind}"', None, where)
+        if "flip_normals" in p and kind != "obj" and kind != "ply" and \
+                self.boolean(p["flip_normals"], False):
+            self.outside(p["flip_normals"], "flip_normals", None, where)
+        steps = self.to_world(p.get("to_world"))
+        if steps:
+            shape["to_world"] = steps
+        bsdfs = [c for c in node.children if c.tag in ("bsdf",) or
+                 (c.tag == "ref" and self.res.deref(c).tag == "bsdf")]
+        emitters = [c for c in node.children if c.tag == "emitter"]
+        if bsdfs:
+            shape["material"] = self.material(bsdfs[0], where)
+        elif not emitters:  # Mitsuba gives a shape without a BSDF a grey diffuse one
+            shape["material"] = self._default_material()
+        if emitters:
+            e = emitters[0]
+            if e.type != "area":
+                self.outside(e, f'emitter "{e.type}" on a shape', None, where)
+            shape["emitter"] = {"radiance": self.color(self.props(e).get("radiance"), where,
+                                                       [1.0] * 3)}
+            if not bsdfs:
+                shape["material"] = self._default_material()
+        out.append(shape)
+
+    def _default_material(self) -> str:
+        mats = self.out["materials"]
+        if "default" not in mats:
+            mats["default"] = {"type": "diffuse", "reflectance": [0.5, 0.5, 0.5],
+                               "two_sided": False}
+            self.note("materials.default", "Mitsuba's default BSDF of a shape without one "
+                                           "(a one-sided diffuse of reflectance 0.5)")
+        return "default"
+
+
+def _single_triangle(path: Path) -> list | None:
+    """The three vertices of a mesh file with exactly one triangle (else None)."""
+    from tracer.meshio import MeshError, load_mesh
+
+    try:
+        if path.stat().st_size > 4096:  # a one-face mesh is a few lines
+            return None
+        data = load_mesh(path)
+    except (MeshError, OSError):
+        return None
+    if len(data.faces) != 1:
+        return None
+    return [[float(x) for x in data.vertices[i]] for i in data.faces[0]]
+
+
+def read_xml(path: str | Path, approximate: bool = False, convert=None,
+             **params) -> Imported:
+    """A Mitsuba 3 XML scene as a scene-format document (see the module's docstring).
+
+    ``params``: values for the file's ``$name`` parameters (they override its
+    ``<default>``s), as ``mi.load_file(path, name=value)`` takes them. ``convert``:
+    ``convert(serialized_file, shape_index) -> mesh file`` for Mitsuba's
+    ``serialized`` meshes (the importer's, through Mitsuba); without it they are
+    refused.
+    """
+    try:
+        return _Importer(Path(path), approximate, params, convert).run()
+    except RecursionError:
+        raise XMLImportError(f"{path}: elements nested too deeply") from None
