@@ -58,14 +58,17 @@ ALL = select_scenes(SCENES, None)
 
 def _uses_exact_fresnel(path: Path) -> bool:
     """The scene, as it is judged, has a dielectric in use whose weights are the exact
-    Fresnel equations (a declared Schlick is judged with them too, see compare.comparable);
-    the classic model's fixed weights have no Fresnel term."""
+    Fresnel equations (a declared Schlick is judged with them too, see compare.comparable),
+    or a thin dielectric or a plastic, whose weights are made of them; the classic model's
+    fixed weights have no Fresnel term, a conductor's is the complex one."""
     from reference.compare import comparable
     from tracer import load_scene
+    from tracer.materials import plastic, thindielectric
     from tracer.scene import Dielectric
 
     scene = comparable(load_scene(path))
-    return any(isinstance(m, Dielectric) and m.fresnel == "exact"
+    return any((isinstance(m, Dielectric) and m.fresnel == "exact") or
+               isinstance(m, (plastic.MODEL, thindielectric.MODEL))
                for m in scene.used_materials())
 
 
