@@ -71,7 +71,7 @@ FORMULAS: dict[tuple[str, str], list[tuple[str, str]]] = {
                                "+ kr R + kt T", "Whitted's illumination model"),
                               ("Heckbert's fixed refraction weights", "Recursion")],
     ("light", "point"): [("inverse-square falloff E = I cos / r^2", "Point lights")],
-    ("light", "spot"): [("spot cone falloff (smoothstep between beam and cutoff)", "Spot lights"),
+    ("light", "spot"): [("spot falloff linear in the angle between beam and cutoff (Mitsuba's)", "Spot lights"),
                         ("inverse-square falloff", "Point lights")],
     ("light", "directional"): [("irradiance E cos(theta), no falloff", "Directional lights")],
     ("light", "constant"): [("uniform sphere directions, pdf 1 / (4 pi)",

@@ -88,7 +88,7 @@ def test_diffuse_fresnel_reflectance_fit_is_mitsubas(mi, jit):
     assert at_one < 1e-3 and ours[0] > 0.9
 
 
-def test_area_lights_on_a_mesh_a_polygon_and_a_cylinder_agree_with_mitsuba(tmp_path):
+def test_area_lights_on_a_mesh_a_cube_a_polygon_and_a_cylinder_agree_with_mitsuba(tmp_path):
     # Mitsuba samples these emitters its own way (no shared light samples), so the
     # one-lobe reference judges them by the z-test of reference.compare (Sidak alpha
     # 0.01 per pixel, >= 99.75 % passing; regions within alpha 0.001), the tracer's

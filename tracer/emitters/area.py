@@ -287,6 +287,7 @@ SAMPLERS: dict[str, type] = {
     "triangle": _Triangle,
     "disk": _Ellipse,
     "mesh": _Triangles,
+    "cube": _Triangles,           # Mitsuba's cube: a mesh of 12 triangles
     "polygon": _PolygonTriangles,
     "cylinder": _CylinderSide,
 }
