@@ -386,8 +386,9 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
 def _write_obj(path: Path, node: dict) -> None:
     v, f = node["vertices"], node["faces"]
     lines = [f"v {_fmt(a)} {_fmt(b)} {_fmt(c)}\n" for a, b, c in np.asarray(v, dtype=np.float32)]
-    if node["uvs"] is not None:
-        lines += [f"vt {_fmt(a)} {_fmt(b)}\n" for a, b in np.asarray(node["uvs"], np.float32)]
+    if node["uvs"] is not None:  # v written as 1 - v: Mitsuba's obj (and whitted's) flips it
+        lines += [f"vt {_fmt(a)} {_fmt(1 - b)}\n"
+                  for a, b in np.asarray(node["uvs"], np.float32)]
     if node["normals"] is not None:
         lines += [f"vn {_fmt(a)} {_fmt(b)} {_fmt(c)}\n"
                   for a, b, c in np.asarray(node["normals"], dtype=np.float32)]

@@ -487,3 +487,26 @@ def test_camera_to_world_in_toml_and_its_errors():
     with pytest.raises(SceneError, match="film.stddev: stddev is for"):
         parse_scene({**base, "film": {"stddev": 0.5},
                      "camera": {"origin": [0, 0, 1], "target": [0, 0, 0]}}, "c.toml")
+
+
+def test_exported_obj_texture_coordinates_are_mitsubas_after_its_flip(mi, tmp_path):
+    """`whitted export` writes meshes as OBJ files, whose v Mitsuba's obj plugin flips (as
+    whitted's reader does): the file holds 1 - v, so that Mitsuba loading the XML sees the
+    texture coordinates the tracer uses (the textured floor polygon of `textured`)."""
+    from reference.mitsuba_scene import write_xml
+    from tracer.meshio import load_mesh
+
+    scene = load_scene(ROOT / "scenes" / "textured.toml")
+    xml = tmp_path / "textured.xml"
+    write_xml(scene, xml)
+    objs = sorted((tmp_path / "meshes").glob("*.obj"))
+    assert objs
+    loaded = mi.load_file(str(xml))
+    uv_mi = [np.asarray(p["vertex_texcoords"]).reshape(-1, 2)
+             for p in (mi.traverse(s) for s in loaded.shapes())
+             if "vertex_texcoords" in p and len(p["vertex_texcoords"])]
+    ours = load_mesh(objs[0])
+    assert len(uv_mi) == 1
+    np.testing.assert_allclose(uv_mi[0], ours.uvs, atol=1e-6)
+    # and they are the polygon's own plane coordinates, not flipped ones
+    assert ours.uvs[:, 1].min() == 0 and ours.uvs[:, 1].max() > 1

@@ -920,6 +920,7 @@ def _parse_camera(t: _Table) -> Camera:
         up = tuple(float(x) for x in m[:3, 1] / _norm(m[:3, 1]))
     else:
         if not t.has("origin"):
+            t._unknown_first("origin")  # a misspelt key is the likelier fault
             t.fail("origin", "missing; expected a list of 3 numbers (or give to_world instead "
                              "of origin/target/up)")
         origin, target = t.vec3("origin"), t.vec3("target")

@@ -210,7 +210,15 @@ class _Recorder(_scene._Table):
         return self.answers[key]
 
     def is_table(self, key: str) -> bool:
-        return self.has(key)
+        # A choice of its own: a key known to be present (``has``) may still be a table
+        # or not (a ``to_world`` of one step or a list of steps).
+        if self.answers.get(key) is False:
+            return False
+        if ("table", key) not in self.answers:
+            self.answers[("table", key)] = bool(self.run.decide(2))
+            if self.answers[("table", key)]:
+                self.record.present.add(key)
+        return self.answers[("table", key)]
 
     def choose(self, options, noun):
         self.record.exactly_one = True
