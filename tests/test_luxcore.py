@@ -204,3 +204,22 @@ def test_report_shows_the_vote_and_keeps_the_tracers_exit_status(luxcore, tmp_pa
     md = (tmp_path / "report.md").read_text()
     assert "## Three renderers" in md and "luxcore is the odd one out" in md
     assert "luxcore is the odd one out" in (tmp_path / "index.html").read_text()
+
+
+def test_block_allowance_is_the_binomial_quantile_of_noise():
+    """The vote's rule 3 allows as many blocks beyond 3 sigma as noise alone makes at a
+    family-wise 1e-3: checked against the binomial tail computed here directly."""
+    from math import comb, erf, sqrt
+
+    from reference.luxcore_compare import blocks_allowed
+
+    p = 1 - erf(3 / sqrt(2))
+    def tail(n, j):  # P(count > j); terms beyond j + 40 are below 1e-60 here
+        return sum(comb(n, i) * p ** i * (1 - p) ** (n - i)
+                   for i in range(j + 1, min(n, j + 40) + 1))
+
+    for n in (12, 48, 192, 1200):
+        k = blocks_allowed(n)
+        assert tail(n, k) < 1e-3 <= tail(n, k - 1), (n, k)
+    assert blocks_allowed(48) == 2        # 32 x 24 pixels: 2 % would allow none
+    assert blocks_allowed(1200) < 0.02 * 1200  # large images keep rule 3's 2 %
