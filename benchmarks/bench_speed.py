@@ -225,6 +225,7 @@ def cmd_recursion(args) -> int:
         res = integ.render()
         times.append(time.perf_counter() - t0)
     t = statistics.median(times)
+    peak = self_peak()  # before minray's count, which is computed in numpy
     ours = res.rays_total
     mr = ray_count(scene, depth)
     print(f"  rays: tracer {ours:,} ({sum(res.rays_per_level):,} + "
@@ -232,7 +233,7 @@ def cmd_recursion(args) -> int:
           f"({sum(mr.trace):,} + {sum(mr.shadow):,} shadow)")
     rate = ours / t
     print(f"  tracer (in-process, median of {args.repeat})  {t:8.2f} s   {rate / 1e6:7.1f} M rays/s"
-          f"   peak {mb(self_peak())} (this process)")
+          f"   peak {mb(peak)} (this process)")
     secs = _minray_rate(n, depth, args.repeat, mr.total)
     print(f"  tracer's time at minray's count: {mr.total / t / 1e6:.1f} M rays/s (the same work "
           "measured by minray's rays; the tracer skips rays that cannot change the image)")
