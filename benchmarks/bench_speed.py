@@ -13,10 +13,8 @@ process whose kernels are cached, the everyday case.
     python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
     python benchmarks/bench_speed.py report     [--quick]
     python benchmarks/bench_speed.py all        (all of them at their defaults, but memory
-                                                 at 4 spp: the full 256 spp takes hours on
-                                                 a 2-core CPU; the peak does not grow with
-                                                 spp, the tracer works in chunks of 2^21
-                                                 samples)
+                                                 at 16 spp: 256 spp takes about 15 minutes
+                                                 on a 2-core CPU)
 
 Targets (what each prints beside its figures): direct light, the whole
 `whitted render` process <= 0.5x a whole `mitsuba` process rendering the same
@@ -359,7 +357,8 @@ def cmd_memory(args) -> int:
     print(f"  {secs:.1f} s, peak resident memory {mb(peak)} ({peak / GB:.2f} GB)")
     full = args.size == (1920, 1080) and args.spp >= 256 and args.depth >= 25
     print(f"  target < 4 GB at 1920x1080, 256 spp, DEPTH 25: {verdict(peak < 4 * GB)}"
-          + ("" if full else " at the size run here (not the target's size)"))
+          + ("" if full else " at the size run here, not the target's (the peak grows "
+                             "with spp)"))
     return 0
 
 
@@ -427,13 +426,13 @@ def main(argv=None) -> int:
     rp = sub.add_parser("report", help="time `whitted report`")
     rp.add_argument("--quick", action="store_true")
 
-    sub.add_parser("all", help="every subcommand at its defaults (memory at 4 spp)")
+    sub.add_parser("all", help="every subcommand at its defaults (memory at 16 spp)")
     args = p.parse_args(argv)
     cmds = {"direct": cmd_direct, "mesh": cmd_mesh, "recursion": cmd_recursion,
             "quality": cmd_quality, "memory": cmd_memory, "report": cmd_report}
     if args.cmd == "all":
         for c in cmds:
-            extra = ["--spp", "4"] if c == "memory" else []
+            extra = ["--spp", "16"] if c == "memory" else []
             subprocess.run([sys.executable, __file__, c, *extra], check=False)
         return 0
     return cmds[args.cmd](args)
