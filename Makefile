@@ -51,7 +51,7 @@ bench-mesh: $(STAMP)
 	$(BIN)/python benchmarks/bench_mesh.py
 
 ## bench-speed: every speed target against Mitsuba and minray, each a ratio from one run
-## (SPEED=direct|mesh|recursion|quality|memory|report picks one; default all, ~30 min)
+## (SPEED=direct|mesh|recursion|quality|memory|report picks one; default all, ~25 min on 2 cores)
 SPEED ?= all
 bench-speed: $(STAMP)
 	$(BIN)/python benchmarks/bench_speed.py $(SPEED)
