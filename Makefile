@@ -6,7 +6,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 STAMP  := $(VENV)/.installed-stamp
 
-.PHONY: setup report report-quick test browser lint bench bench-mesh clean
+.PHONY: setup report report-quick test browser lint bench bench-mesh bench-speed clean
 
 ## setup: the virtual environment with whitted, its pinned dependencies and the LuxCore
 ## extra (whitted[luxcore], the third renderer), plus Chromium
@@ -50,6 +50,12 @@ bench: $(STAMP)
 ## bench-mesh: the BVH against Mitsuba's Embree on a 144,000-triangle mesh
 bench-mesh: $(STAMP)
 	$(BIN)/python benchmarks/bench_mesh.py
+
+## bench-speed: every speed target against Mitsuba and minray, each a ratio from one run
+## (SPEED=direct|mesh|recursion|quality|memory|report picks one; default all, ~25 min on 2 cores)
+SPEED ?= all
+bench-speed: $(STAMP)
+	$(BIN)/python benchmarks/bench_speed.py $(SPEED)
 
 clean:
 	rm -rf $(VENV) reports/*.html reports/*.md reports/*.json reports/*.png reports/scenes out

@@ -1,0 +1,442 @@
+"""Speed targets against Mitsuba and minray, each measured as a ratio in the same run.
+
+One subcommand per target; each prints its figures, the ratio and the target,
+and the peak resident memory (ru_maxrss) of every child process it times.
+Timings are medians of ``--repeat`` runs after one warm-up run (which also
+fills Dr.Jit's on-disk kernel cache), so a whole-process time is that of a
+process whose kernels are cached, the everyday case.
+
+    python benchmarks/bench_speed.py direct     [--size 800x480] [--spp 64] [--repeat 3]
+    python benchmarks/bench_speed.py mesh       [--triangles 1000000] [--repeat 3]
+    python benchmarks/bench_speed.py recursion  [--size 256] [--depth 25] [--repeat 3]
+    python benchmarks/bench_speed.py quality    [--size 200x150] [--rel-rmse 0.02] [SCENE ...]
+    python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
+    python benchmarks/bench_speed.py report     [--quick]
+    python benchmarks/bench_speed.py all        (all of them at their defaults, but memory
+                                                 at 16 spp: 256 spp takes about 15 minutes
+                                                 on a 2-core CPU)
+
+Targets (what each prints beside its figures): direct light, the whole
+`whitted render` process <= 0.5x a whole `mitsuba` process rendering the same
+scene with `direct`, and in-process >= 3x faster; meshes, the BVH built no
+slower than Mitsuba loads the scene and a render <= 1.5x Embree's; recursion,
+>= 150 M rays/s on two cores beside minray's own rate; equal quality, the
+tracer reaching an RMSE >= 10x sooner than Mitsuba's `path`; memory, the peak
+of a 1920x1080, 256 spp, DEPTH 25 render < 4 GB; `whitted report` (full) timed
+with the commit it ran on.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import statistics
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+BIN = Path(sys.executable).parent
+sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "benchmarks"))
+
+import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+
+MINRAY = Path(os.environ.get("MINRAY_SOURCE", "/work/shared/minray/minray.c"))
+GB = 1024 ** 3
+
+
+# ------------------------------------------------------------------ child processes
+
+
+def _gnu_time() -> str | None:
+    """GNU time, which reports its child's peak memory as measured from a small process."""
+    exe = shutil.which("time") or ("/usr/bin/time" if Path("/usr/bin/time").exists() else None)
+    if exe is None:
+        return None
+    out = subprocess.run([exe, "-f", "%M", "true"], capture_output=True, text=True)
+    return exe if out.returncode == 0 and out.stderr.strip().isdigit() else None
+
+
+GNU_TIME = _gnu_time()
+
+
+def run_child(cmd: list[str], stdout=subprocess.DEVNULL, check: bool = True) -> tuple[float, int]:
+    """Wall seconds and peak resident bytes (ru_maxrss of this child alone) of one process.
+
+    Linux keeps a forked child's peak across exec, so a child forked from this
+    (large) Python process would report at least this process's memory. GNU
+    time, a small process, forks the command and reports its ru_maxrss; without
+    it the figure is wait4's, an upper bound that includes this process's size.
+    """
+    cmd = [str(c) for c in cmd]
+    with tempfile.NamedTemporaryFile("r") as rss:
+        full = [GNU_TIME, "-o", rss.name, "-f", "%M", *cmd] if GNU_TIME else cmd
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(full, stdout=stdout, stderr=subprocess.PIPE)
+        _, status, usage = os.wait4(proc.pid, 0)
+        seconds = time.perf_counter() - t0
+        lines = rss.read().split()
+    proc.returncode = os.waitstatus_to_exitcode(status)
+    err = proc.stderr.read().decode(errors="replace")
+    proc.stderr.close()
+    if proc.returncode < 0 or (check and proc.returncode != 0):
+        raise SystemExit(f"error: {' '.join(cmd)} exited {proc.returncode}: "
+                         f"{err.strip().splitlines()[-1:] or ''}")
+    kb = int(lines[-1]) if GNU_TIME and lines and lines[-1].isdigit() else usage.ru_maxrss
+    return seconds, kb * 1024  # both report kilobytes
+
+
+def timed_children(cmd: list[str], repeat: int, stdout=subprocess.DEVNULL,
+                   check: bool = True) -> tuple[float, int]:
+    """Median seconds of ``repeat`` runs after one warm-up run, and the largest peak memory."""
+    _, peak = run_child(cmd, stdout, check)
+    times = []
+    for _ in range(repeat):
+        s, m = run_child(cmd, stdout, check)
+        times.append(s)
+        peak = max(peak, m)
+    return statistics.median(times), peak
+
+
+def mb(n: int) -> str:
+    return f"{n / 2 ** 20:,.0f} MB"
+
+
+def self_peak() -> int:
+    import resource
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+
+
+def machine_note() -> str:
+    load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
+    return (f"{os.cpu_count()} CPU cores, load average {load} at the start "
+            "(a shared machine: other jobs ran at the same time)")
+
+
+def commit() -> str:
+    try:
+        rev = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "--short", "HEAD"],
+                             capture_output=True, text=True, check=True).stdout.strip()
+        dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain", "--",
+                                "tracer", "reference"],
+                               capture_output=True, text=True).stdout.strip()
+        return rev + (" (tracer/ or reference/ modified)" if dirty else "")
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def verdict(ok: bool) -> str:
+    return "met" if ok else "NOT met"
+
+
+# ------------------------------------------------------------------ 1. direct light
+
+
+def cmd_direct(args) -> int:
+    size = f"{args.size[0]}x{args.size[1]}"
+    print(f"direct light: {args.scene}, {size}, {args.spp} spp; {machine_note()}")
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        common = [args.scene, "--size", size, "--spp", str(args.spp)]
+        # the XML is written once, untimed: the Mitsuba process only reads and renders it
+        run_child([BIN / "whitted", "export", *common, "--integrator", "direct",
+                   "-o", tmp / "scene.xml"])
+        tracer_cmd = [BIN / "whitted", "render", *common, "-o", tmp / "tracer.exr"]
+        mitsuba_cmd = [BIN / "mitsuba", "-m", "llvm_ad_rgb", tmp / "scene.xml",
+                       "-o", tmp / "mitsuba.exr"]
+        t_tr, m_tr = timed_children(tracer_cmd, args.repeat)
+        t_mi, m_mi = timed_children(mitsuba_cmd, args.repeat)
+    print(f"  whole process, median of {args.repeat} after a warm-up:")
+    print(f"    whitted render              {t_tr:8.2f} s   peak {mb(m_tr)}")
+    print(f"    mitsuba (direct, XML)       {t_mi:8.2f} s   peak {mb(m_mi)}")
+    ratio = t_tr / t_mi
+    print(f"    ratio tracer / Mitsuba = {ratio:.2f} (target <= 0.5: {verdict(ratio <= 0.5)})")
+    print("  in-process (benchmarks/bench_direct.py):", flush=True)
+    out = subprocess.run([sys.executable, ROOT / "benchmarks" / "bench_direct.py", args.scene,
+                          "--size", size, "--spp", str(args.spp), "--repeat", str(args.repeat)],
+                         capture_output=True, text=True)
+    if out.returncode != 0:
+        raise SystemExit(f"error: bench_direct.py failed: {out.stderr.strip()[-300:]}")
+    lines = out.stdout.strip().splitlines()
+    for line in lines:
+        print("    " + line)
+    r = float(lines[-1].split("=")[1].split()[0])
+    print(f"    target Mitsuba direct / tracer >= 3: {verdict(r >= 3)}")
+    return 0
+
+
+# ------------------------------------------------------------------ 2. meshes
+
+
+def cmd_mesh(args) -> int:
+    print(f"meshes: {args.triangles:,} triangles; {machine_note()}", flush=True)
+    cmd = [sys.executable, ROOT / "benchmarks" / "bench_mesh.py", "--triangles",
+           str(args.triangles), "--repeat", str(args.repeat), "--size",
+           f"{args.size[0]}x{args.size[1]}", "--spp", str(args.spp)]
+    with tempfile.TemporaryFile("w+") as f:
+        seconds, peak = run_child(cmd, stdout=f)
+        f.seek(0)
+        text = f.read()
+    for line in text.strip().splitlines():
+        print("  " + line)
+    print(f"  the whole benchmark process: {seconds:.1f} s, peak {mb(peak)} "
+          "(both meshes, the tracer's and Mitsuba's, in one process)")
+    return 0
+
+
+# ------------------------------------------------------------------ 3. recursion
+
+
+def _minray_rate(size: int, depth: int, repeat: int, count: int) -> float | None:
+    cc = shutil.which("cc")
+    if cc is None or not MINRAY.exists():
+        print(f"  minray: not run ({'no C compiler (cc)' if cc is None else f'no {MINRAY}'})")
+        return None
+    with tempfile.TemporaryDirectory() as tmp:
+        exe = Path(tmp) / "minray"
+        subprocess.run([cc, "-std=gnu89", "-w", "-O2", f"-DSIZE={size}", f"-DDEPTH={depth}",
+                        MINRAY, "-o", exe, "-lm"], check=True)
+        # minray's main returns no value (K&R C), so its exit status is arbitrary
+        secs, peak = timed_children([exe], repeat, check=False)
+    print(f"  minray (cc -O2, one thread)  {secs:8.2f} s   {count / secs / 1e6:7.1f} M rays/s"
+          f"   peak {mb(peak)}  (its count from reference.minray.ray_count)")
+    return secs
+
+
+def cmd_recursion(args) -> int:
+    from reference.cli import resolve_scene
+    from reference.minray import ray_count
+    from tracer import backend, load_scene
+    from tracer.integrator import Integrator
+
+    name = backend.use(args.backend)
+    n, depth = args.size, args.depth
+    scene = load_scene(resolve_scene("heckbert_minray")).with_overrides(
+        size=(n, n), max_depth=depth + 1)
+    print(f"recursion: heckbert_minray, {n}x{n}, DEPTH {depth}, backend {name}; "
+          f"{machine_note()}", flush=True)
+    integ = Integrator(scene)
+    res = integ.render()  # warm-up: compiles each level's kernel
+    times = []
+    for _ in range(args.repeat):
+        t0 = time.perf_counter()
+        res = integ.render()
+        times.append(time.perf_counter() - t0)
+    t = statistics.median(times)
+    peak = self_peak()  # before minray's count, which is computed in numpy
+    ours = res.rays_total
+    mr = ray_count(scene, depth)
+    print(f"  rays: tracer {ours:,} ({sum(res.rays_per_level):,} + "
+          f"{sum(res.shadow_rays_per_level):,} shadow), minray {mr.total:,} "
+          f"({sum(mr.trace):,} + {sum(mr.shadow):,} shadow)")
+    rate = ours / t
+    print(f"  tracer (in-process, median of {args.repeat})  {t:8.2f} s   {rate / 1e6:7.1f} M rays/s"
+          f"   peak {mb(peak)} (this process)")
+    secs = _minray_rate(n, depth, args.repeat, mr.total)
+    print(f"  tracer's time at minray's count: {mr.total / t / 1e6:.1f} M rays/s (the same work "
+          "measured by minray's rays; the tracer skips rays that cannot change the image)")
+    if secs is not None:
+        print(f"  ratio minray time / tracer time = {secs / t:.2f} (> 1: the tracer is faster)")
+    print(f"  target >= 150 M rays/s on two cores: {verdict(rate >= 150e6)}")
+    return 0
+
+
+# ------------------------------------------------------------------ 4. equal quality
+
+
+GLASS = ["glass_sphere", "whitted_1980", "tir_prisms", "emitter_in_glass"]
+
+
+def _rmse(a, b) -> float:
+    import numpy as np
+    return float(np.sqrt(np.mean((np.asarray(a, np.float64) - np.asarray(b, np.float64)) ** 2)))
+
+
+def cmd_quality(args) -> int:
+    """Samples, and seconds, each integrator needs to come within an RMSE of its own limit.
+
+    The two integrators converge to different images: Mitsuba's `path` adds the
+    indirect diffuse light that Whitted's model leaves out by definition, so a
+    single reference would measure that difference rather than noise, and no
+    number of samples would close it. Each is therefore measured against its own
+    converged image. The tracer: against its own render at ``--ref-spp`` (its
+    camera samples are stratum centres, so its error is deterministic aliasing
+    plus the area lights' noise; the reference's own error is at most that of
+    ``--ref-spp`` samples). Mitsuba `path` (jittered strata, box filter): the
+    RMSE of one render against its expectation is estimated without a reference
+    from two renders of independent seeds, RMSE(a, b) / sqrt(2), since
+    E|a - b|^2 = 2 E|a - mu|^2. Samples per pixel climb by about sqrt(2) (squares
+    of 1, 2, 3, 4, 6, 8, 11, ...), so a ratio is resolved to within about 1.4x.
+    """
+    import drjit as dr
+    import numpy as np
+
+    from reference import mitsuba
+    from reference.cli import resolve_scene
+    from reference.mitsuba_scene import load
+    from tracer import backend, load_scene
+    from tracer.integrator import Integrator
+
+    name = backend.use(args.backend)
+    mi = mitsuba()
+    w, h = args.size
+    print(f"equal quality: {w}x{h}, relative RMSE target {args.rel_rmse} (RMSE / mean of "
+          f"the converged image), backend {name}; {machine_note()}")
+    print("  the tracer against its own render at "
+          f"{args.ref_spp} spp; Mitsuba path against its own expectation (two seeds)")
+    ladder = [n * n for n in (1, 2, 3, 4, 6, 8, 11, 16, 23, 32, 45, 64, 91, 128)]
+    for sname in args.scenes:
+        base = load_scene(resolve_scene(sname)).with_overrides(size=(w, h))
+        ref = Integrator(base.with_overrides(spp=args.ref_spp)).render().image
+        scale = float(np.mean(ref))
+        goal = args.rel_rmse * scale
+        t_tr = spp_tr = None
+        for spp in ladder:
+            if spp >= args.ref_spp:
+                break
+            integ = Integrator(base.with_overrides(spp=spp))
+            integ.render()  # compiles
+            t0 = time.perf_counter()
+            img = integ.render().image
+            t = time.perf_counter() - t0
+            if _rmse(img, ref) <= goal:
+                t_tr, spp_tr, err_tr = t, spp, _rmse(img, ref)
+                break
+        # jittered strata, as Mitsuba samples by default: its pixel integral converges too
+        ms = load(base, mi, "path", jitter=True)
+        t_mi = spp_mi = None
+        for spp in ladder:
+            if spp > args.max_mitsuba_spp:
+                break
+            imgs, ts = [], []
+            for seed in (0, 1):
+                t0 = time.perf_counter()
+                img = mi.render(ms, spp=spp, seed=seed)
+                dr.eval(img)
+                dr.sync_thread()
+                ts.append(time.perf_counter() - t0)
+                # a copy: the next render writes into the same film's storage
+                imgs.append(np.array(img, dtype=np.float64, copy=True)[..., :3])
+            err = _rmse(*imgs) / np.sqrt(2)
+            if err <= goal:
+                t_mi, spp_mi, err_mi = min(ts), spp, err
+                break
+        tr = (f"{spp_tr} spp, {t_tr:.3f} s (RMSE {err_tr:.4g})" if t_tr is not None
+              else f"not reached below {args.ref_spp} spp")
+        mt = (f"{spp_mi} spp, {t_mi:.3f} s (RMSE {err_mi:.4g})" if t_mi is not None
+              else f"not reached by {args.max_mitsuba_spp} spp (last RMSE {err:.4g})")
+        print(f"  {sname} (max_depth {base.film.max_depth}, goal RMSE {goal:.4g}):")
+        print(f"    tracer       {tr}")
+        print(f"    Mitsuba path {mt}")
+        if t_tr is not None and t_mi is not None:
+            r = t_mi / t_tr
+            print(f"    ratio Mitsuba / tracer = {r:.1f} (target >= 10: {verdict(r >= 10)})")
+        elif t_tr is not None:
+            print(f"    ratio Mitsuba / tracer > {min(ts) / t_tr:.1f} "
+                  "(Mitsuba did not reach the goal; a lower bound)")
+        sys.stdout.flush()
+    print(f"  peak resident memory of this process {mb(self_peak())}")
+    return 0
+
+
+# ------------------------------------------------------------------ 5. memory
+
+
+def cmd_memory(args) -> int:
+    size = f"{args.size[0]}x{args.size[1]}"
+    print(f"memory: whitted render {args.scene} --size {size} --spp {args.spp} --depth "
+          f"{args.depth}; {machine_note()}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        secs, peak = run_child([BIN / "whitted", "render", args.scene, "--size", size,
+                                "--spp", str(args.spp), "--depth", str(args.depth),
+                                "-o", Path(tmp) / "out.exr"])
+    print(f"  {secs:.1f} s, peak resident memory {mb(peak)} ({peak / GB:.2f} GB)")
+    full = args.size == (1920, 1080) and args.spp >= 256 and args.depth >= 25
+    print(f"  target < 4 GB at 1920x1080, 256 spp, DEPTH 25: {verdict(peak < 4 * GB)}"
+          + ("" if full else " at the size run here, not the target's (the peak grows "
+                             "with spp)"))
+    return 0
+
+
+# ------------------------------------------------------------------ 6. whitted report
+
+
+def cmd_report(args) -> int:
+    rev = commit()
+    what = "--quick" if args.quick else "full"
+    print(f"whitted report ({what}) at commit {rev}; {machine_note()}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [BIN / "whitted", "report", "-o", tmp] + (["--quick"] if args.quick else [])
+        t0 = time.perf_counter()
+        proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        _, status, usage = os.wait4(proc.pid, 0)
+        secs = time.perf_counter() - t0
+    rc = os.waitstatus_to_exitcode(status)
+    print(f"  {secs:.0f} s ({secs / 60:.1f} min), exit status {rc}, "
+          f"peak {mb(usage.ru_maxrss * 1024)}")
+    print("  target: half of the time measured at the baseline commit on the same machine")
+    return 0
+
+
+# ------------------------------------------------------------------ main
+
+
+def main(argv=None) -> int:
+    from reference.cli import _size
+
+    p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    p.add_argument("--backend", default=None, help="Dr.Jit backend for in-process runs")
+    sub = p.add_subparsers(dest="cmd", required=True)
+
+    d = sub.add_parser("direct", help="whole process and in-process against Mitsuba direct")
+    d.add_argument("--scene", default="three_lights")
+    d.add_argument("--size", type=_size, default=(800, 480))
+    d.add_argument("--spp", type=int, default=64)
+    d.add_argument("--repeat", type=int, default=3)
+
+    m = sub.add_parser("mesh", help="BVH build and render against Mitsuba/Embree")
+    m.add_argument("--triangles", type=int, default=1_000_000)
+    m.add_argument("--size", type=_size, default=(640, 480))
+    m.add_argument("--spp", type=int, default=16)
+    m.add_argument("--repeat", type=int, default=3)
+
+    r = sub.add_parser("recursion", help="rays/s on Heckbert's scene against minray")
+    r.add_argument("--size", type=int, default=256)
+    r.add_argument("--depth", type=int, default=25)
+    r.add_argument("--repeat", type=int, default=3)
+
+    q = sub.add_parser("quality", help="time to an RMSE against Mitsuba's path")
+    q.add_argument("scenes", nargs="*", default=GLASS)
+    q.add_argument("--size", type=_size, default=(200, 150))
+    q.add_argument("--rel-rmse", type=float, default=0.02)
+    q.add_argument("--ref-spp", type=int, default=1024)
+    q.add_argument("--max-mitsuba-spp", type=int, default=4096)
+
+    e = sub.add_parser("memory", help="peak memory of a large deep render")
+    e.add_argument("--scene", default="heckbert_minray")
+    e.add_argument("--size", type=_size, default=(1920, 1080))
+    e.add_argument("--spp", type=int, default=256)
+    e.add_argument("--depth", type=int, default=25)
+
+    rp = sub.add_parser("report", help="time `whitted report`")
+    rp.add_argument("--quick", action="store_true")
+
+    sub.add_parser("all", help="every subcommand at its defaults (memory at 16 spp)")
+    args = p.parse_args(argv)
+    cmds = {"direct": cmd_direct, "mesh": cmd_mesh, "recursion": cmd_recursion,
+            "quality": cmd_quality, "memory": cmd_memory, "report": cmd_report}
+    if args.cmd == "all":
+        for c in cmds:
+            extra = ["--spp", "16"] if c == "memory" else []
+            subprocess.run([sys.executable, __file__, c, *extra], check=False)
+        return 0
+    return cmds[args.cmd](args)
+
+
+if __name__ == "__main__":
+    sys.exit(main())
