@@ -45,7 +45,10 @@ sys.path.insert(0, str(ROOT / "benchmarks"))
 
 import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
-MINRAY = Path(os.environ.get("MINRAY_SOURCE", "/work/shared/minray/minray.c"))
+#: minray's C source (Heckbert 1987, with the fixes it needs to build), kept beside the
+#: checkout in ../shared/minray/ and built at benchmark time; MINRAY_SOURCE for another.
+MINRAY = Path(os.environ.get("MINRAY_SOURCE",
+                             Path(__file__).resolve().parents[2] / "shared" / "minray" / "minray.c"))
 GB = 1024 ** 3
 
 
