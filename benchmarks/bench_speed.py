@@ -47,8 +47,8 @@ import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 #: minray's C source (Heckbert 1987, with the fixes it needs to build), kept beside the
 #: checkout in ../shared/minray/ and built at benchmark time; MINRAY_SOURCE for another.
-MINRAY = Path(os.environ.get("MINRAY_SOURCE",
-                             Path(__file__).resolve().parents[2] / "shared" / "minray" / "minray.c"))
+_SHARED = Path(__file__).resolve().parents[2] / "shared"
+MINRAY = Path(os.environ.get("MINRAY_SOURCE", _SHARED / "minray" / "minray.c"))
 GB = 1024 ** 3
 
 
