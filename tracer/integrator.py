@@ -183,8 +183,11 @@ class Integrator:
         #: traced at all (Heckbert's DEPTH counts exactly the rays it traces).
         self.last_level_sees = bool(self.geo.emitters) or any(
             not e.hit_term for e in self.backgrounds)
-        if chunk_samples is None:
-            chunk_samples = (1 << 24) if backend.name() == "cuda" else (1 << 21)
+        if chunk_samples is None:  # on a CPU, bounded for deep scenes (limits.chunk_samples)
+            from tracer.limits import chunk_samples as cpu_chunk
+
+            chunk_samples = ((1 << 24) if backend.name() == "cuda"
+                             else cpu_chunk(scene.film.max_depth))
         self.chunk_samples = chunk_samples
 
     # ------------------------------------------------------------------ one level
