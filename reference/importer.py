@@ -407,7 +407,6 @@ def validate_case(case: ImportedCase, workdir: Path) -> dict:
     else:
         xml = case.xml
     imp = read_xml(xml)
-    two_sided = _drop_unknown_two_sided(imp.data)
     scene = parse_scene(imp.data, str(xml)).with_overrides(max_depth=2, spp=case.spp)
     _, ref_y, ref_var = render_original(source, case.integrator, spp=case.spp,
                                         passes=case.passes)
@@ -420,29 +419,6 @@ def validate_case(case: ImportedCase, workdir: Path) -> dict:
         "direct" if case.integrator == "direct" else "path, max_depth 2"),
         size=[f.width, f.height], spp=case.spp, passes=case.passes,
         filter=f.filter, approximate=imp.approximate,
-        notes=sum(len(v) for v in imp.notes.values()), two_sided_substituted=two_sided,
+        notes=sum(len(v) for v in imp.notes.values()),
         seconds={"mitsuba": t1 - t0, "tracer": t2 - t1})
     return out
-
-
-def _drop_unknown_two_sided(data: dict) -> bool:
-    """Drop ``two_sided = false`` where this tracer's materials do not know the key yet.
-
-    Only for the report's cases, whose back faces are never seen or lit (closed
-    meshes, walls seen from inside), so that one- and two-sided BSDFs render alike;
-    the comparison with Mitsuba's render of the original judges that claim.
-    """
-    from tracer.errors import SceneError
-    from tracer.scene import parse_scene
-
-    probe = {"camera": {"origin": [0, 0, 1], "target": [0, 0, 0]},
-             "materials": {"m": {"type": "diffuse", "two_sided": False}}}
-    try:
-        parse_scene(probe, "<probe>")
-        return False
-    except SceneError:
-        pass
-    dropped = False
-    for m in data.get("materials", {}).values():
-        dropped |= m.pop("two_sided", None) is not None
-    return dropped

@@ -43,32 +43,8 @@ def mi():
     return mitsuba()
 
 
-def _knows(material: dict) -> bool:
-    """Whether this tracer's loader knows a key that the import writes (the newer kinds)."""
-    try:
-        parse_scene({"camera": {"origin": [0, 0, 1], "target": [0, 0, 0]},
-                     "materials": {"m": material}}, "<probe>")
-    except SceneError:
-        return False
-    return True
-
-
-ONE_SIDED = _knows({"type": "diffuse", "two_sided": False})
-
-
-def _scene(data: dict, path, one_sided_matters: bool = True):
-    """The imported document as a Scene.
-
-    Where the loader does not yet know ``two_sided`` (the one-sided BSDFs of a bare
-    Mitsuba ``diffuse``), scenes in which no back face is ever seen or lit render
-    the same with two-sided ones, and the comparison with Mitsuba's render of the
-    original still judges that; scenes where it matters are skipped.
-    """
-    if not ONE_SIDED:
-        if one_sided_matters:
-            pytest.skip("requires the kinds branch (two_sided = false: one-sided BSDFs)")
-        for m in data.get("materials", {}).values():
-            m.pop("two_sided", None)
+def _scene(data: dict, path):
+    """The imported document as a Scene (one-sided BSDFs stay one-sided)."""
     return parse_scene(data, str(path))
 
 
@@ -338,10 +314,9 @@ def test_jitter_positions_are_uniform_in_their_stratum():
 # ---------------------------------------------------------------- Mitsuba's own scenes
 
 
-def _validate(source, xml_path, integrator: str, spp: int, passes: int,
-              one_sided_matters: bool = False, size=None):
+def _validate(source, xml_path, integrator: str, spp: int, passes: int, size=None):
     imp = read_xml(xml_path)
-    scene = _scene(imp.data, xml_path, one_sided_matters).with_overrides(max_depth=2, spp=spp)
+    scene = _scene(imp.data, xml_path).with_overrides(max_depth=2, spp=spp)
     _, ref_y, ref_var = render_original(source, integrator, spp=spp, passes=passes)
     _, test_y, test_var = render_imported(scene, seeds=passes)
     return agreement(test_y, test_var, ref_y, ref_var)
@@ -440,7 +415,7 @@ def test_export_then_import_gives_the_same_scene(path, tmp_path):
     scene = load_scene(path).with_overrides(size=(40, 30), spp=4)
     xml = tmp_path / f"{path.stem}.xml"
     write_xml(scene, xml)
-    back = _scene(read_xml(xml).data, xml, one_sided_matters=False)
+    back = _scene(read_xml(xml).data, xml)
     a, b = render(comparable(scene)).image, render(back).image
     test = "tessellated" if scene.has_tessellated() else "exact-strata"
     verdict, _ = judge(test, image_metrics(b, a, with_flip=False), b, a)
