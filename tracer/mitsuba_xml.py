@@ -662,7 +662,14 @@ class _Importer:
 
     def _mask(self, node, p, where, two_sided):
         out = self.bsdf(self._inner(node), where, two_sided)
-        out["opacity"] = self.scalar_or_color(p.get("opacity"), where, 0.5)
+        opacity = self.scalar_or_color(p.get("opacity"), where, 0.5)
+        if isinstance(opacity, dict) and "checkerboard" in opacity:
+            # Mitsuba's checkerboard swaps its colours in eval_1, the one-value lookup
+            # the mask reads its opacity with (src/textures/checkerboard.cpp): the scene
+            # format's checkerboard is the one Mitsuba renders with them swapped back.
+            board = opacity["checkerboard"]
+            board["color0"], board["color1"] = board["color1"], board["color0"]
+        out["opacity"] = opacity
         return out
 
     def _diffuse(self, node, p, where, two_sided):

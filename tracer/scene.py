@@ -47,7 +47,7 @@ from tracer.materials.mirror import Mirror as Mirror
 from tracer.materials.phong import Phong as Phong
 from tracer.materials.textures import Checkerboard as Checkerboard
 from tracer.materials.textures import Texture as Texture
-from tracer.materials.textures import parse_texture
+from tracer.materials.textures import parse_texture, scalar_texture
 from tracer.materials.textures import texture_max as texture_max
 
 Vec3 = tuple[float, float, float]
@@ -389,7 +389,7 @@ class Scene:
 
     def uses_textures(self) -> bool:
         return any(isinstance(t, Checkerboard) for m in self.used_materials()
-                   for t in m.textures())
+                   for t in (*m.textures(), m.mask_opacity))
 
     def has_tessellated(self) -> bool:
         """Shapes Mitsuba lacks, which the conversion tessellates (paraboloids)."""
@@ -983,7 +983,9 @@ def _parse_material(t: _Table, name: str) -> Material:
     m = _materials.REGISTRY[kind].parse(t, name)
     opacity = 1.0
     if "opacity" not in t.used:  # every kind's opacity, unless the kind has its own
-        opacity = t.number("opacity", 1.0, lo=0, hi=1)
+        # A number, a colour or a texture, read as Mitsuba's mask reads it: one value
+        # per point (the colour's mean, a bitmap's luminance; scalar_texture).
+        opacity = scalar_texture(parse_texture(t, "opacity", 1.0, hi=1))
     t.finish()
     return replace(m, mask_opacity=opacity) if opacity != 1 else m
 

@@ -18,6 +18,7 @@ module here and one line in :data:`REGISTRY` (``docs/extending.md``).
 
 from __future__ import annotations
 
+from dataclasses import replace
 from types import ModuleType
 
 from reference.materials import (
@@ -30,9 +31,11 @@ from reference.materials import (
     plastic,
     thindielectric,
 )
+from reference.materials.textures import texture_tree
 from reference.mitsuba_tree import rgb
 from tracer.errors import UserError
 from tracer.materials import type_of
+from tracer.materials.textures import Checkerboard
 
 #: TOML ``type`` -> the module of that kind's conversions (one line per kind).
 REGISTRY: dict[str, ModuleType] = {
@@ -79,8 +82,28 @@ def bsdf_tree(material, models: bool = False) -> dict:
     model = tracer_only_model(material) if models else None
     tree = model if model is not None else convert(material, "mitsuba")
     if material.mask_opacity != 1:  # every kind: Mitsuba's mask around its BSDF
-        tree = {"type": "mask", "opacity": ("float", material.mask_opacity), "material": tree}
+        tree = {"type": "mask", "opacity": opacity_tree(material.mask_opacity),
+                "material": tree}
     return tree
+
+
+def opacity_tree(opacity) -> tuple | dict:
+    """Mitsuba's ``opacity`` of a mask: a float, or the texture the material reads
+    (tracer.materials.textures.scalar_texture: a bitmap's file, which Mitsuba reads by
+    luminance as the tracer does).
+
+    A checkerboard goes with its two colours swapped: Mitsuba 3's checkerboard picks
+    ``color0`` where frac(u) > 1/2 equals frac(v) > 1/2 in ``eval`` but where they
+    differ in ``eval_1``, the one-value lookup the mask uses (src/textures/
+    checkerboard.cpp; Mitsuba 3.9.1 answers eval_1 = 0.3 and eval = color0 = 0.2 at
+    uv = (0.1, 0.1) for color0 = 0.2, color1 = 0.3), so the swap makes its opacity
+    the scene's checkerboard, color0 where the format says.
+    """
+    if isinstance(opacity, (int, float)):
+        return ("float", float(opacity))
+    if isinstance(opacity, Checkerboard):
+        opacity = replace(opacity, color0=opacity.color1, color1=opacity.color0)
+    return texture_tree(opacity)
 
 
 def tracer_only_model(material) -> dict | None:

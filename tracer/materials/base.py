@@ -57,8 +57,9 @@ class MaterialModel:
     #: The TOML key ``opacity`` of every kind (Mitsuba's ``mask``): the material counts
     #: with this weight, and the ray continues straight through with 1 - opacity (read
     #: by the scene parser for every kind that does not read ``opacity`` itself, applied
-    #: by :mod:`tracer.materials.dispatch`)
-    mask_opacity: float = field(default=1.0, kw_only=True)
+    #: by :mod:`tracer.materials.dispatch`): a float, or a texture model whose three
+    #: channels are equal (:func:`tracer.materials.textures.scalar_texture`)
+    mask_opacity: Any = field(default=1.0, kw_only=True)
 
     #: Parts of this kind that only the tracer models, which a scene may declare in
     #: ``[compare] tracer_only`` (e.g. ``"schlick"``).

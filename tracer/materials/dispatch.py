@@ -27,6 +27,7 @@ from tracer import faults
 from tracer.backend import jit
 from tracer.materials import REGISTRY, type_of
 from tracer.materials.base import MaterialModel, ShadingPoint
+from tracer.materials.textures import TextureTable
 
 
 @dataclass
@@ -147,7 +148,15 @@ class SceneMaterials:
         opacity = [m.mask_opacity for m in materials]
         #: some material is not opaque (``opacity`` < 1, Mitsuba's ``mask``)
         self.has_mask = any(o != 1 for o in opacity)
-        self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
+        #: some opacity is a texture, looked up at the hit's uv (else one float each)
+        self.textured_opacity = any(not isinstance(o, (int, float)) for o in opacity)
+        if self.textured_opacity:
+            # One row a material id, the last (no material) opaque; the three channels
+            # of every row are equal (textures.scalar_texture), so channel x is the value.
+            self.opacity = TextureTable([o if not isinstance(o, (int, float)) else (o,) * 3
+                                         for o in opacity] + [(1.0, 1.0, 1.0)])
+        else:
+            self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
         self.one_sided = jit.Bool(np.asarray(one_sided + [False], dtype=bool))
         self.has_delta = any(k.lobes for k in self.kinds) or self.has_mask
 
@@ -158,7 +167,11 @@ class SceneMaterials:
         parts = []
         opacity = None
         if self.has_mask:
-            opacity = dr.select(valid, dr.gather(jit.Float, self.opacity, mid, valid), 1.0)
+            if self.textured_opacity:
+                value = self.opacity.eval(mid, si.uv, valid).x
+            else:
+                value = dr.gather(jit.Float, self.opacity, mid, valid)
+            opacity = dr.select(valid, value, 1.0)
         if self.has_one_sided:  # black from behind: no kind answers for those lanes
             valid = valid & ~(dr.gather(jit.Bool, self.one_sided, mid, valid) & (si.cos_i < 0))
         for i, bsdf in enumerate(self.kinds):

@@ -148,6 +148,32 @@ def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
     return board
 
 
+#: Rec. 709 luminance weights of linear RGB (Mitsuba's ``luminance()``, used by its
+#: ``bitmap`` texture's one-value lookup ``eval_1``).
+LUMINANCE = (0.212671, 0.715160, 0.072169)
+
+
+def scalar_texture(tex: Texture) -> float | Checkerboard | Bitmap:
+    """A texture parameter read as one value per point, as Mitsuba's ``Texture.eval_1``
+    reads it (the ``opacity`` of its ``mask``: src/bsdfs/mask.cpp, ``eval_opacity``).
+
+    Mitsuba 3's ``eval_1`` of an ``srgb`` colour is the mean of its channels
+    (src/textures/srgb.cpp), of an RGB ``bitmap`` the luminance of the interpolated
+    texel (src/textures/bitmap.cpp; luminance is linear, so the luminance of each
+    texel interpolated is the same), of a ``checkerboard`` its colours' ``eval_1``.
+    A constant comes back as a float; a texture as one whose three channels are equal.
+    """
+    if isinstance(tex, Bitmap):
+        grey = np.asarray(tex.texels, np.float64) @ np.asarray(LUMINANCE)
+        texels = np.repeat(grey[..., None], 3, axis=-1).astype(np.float32)
+        return Bitmap(tex.filename, texels, tex.filter_type, tex.raw, tex.wrap_mode)
+    if isinstance(tex, Checkerboard):
+        c0, c1 = scalar_texture(tex.color0), scalar_texture(tex.color1)
+        return Checkerboard((c0,) * 3, (c1,) * 3, tex.scale)
+    r, g, b = tex
+    return r if r == g == b else (r + g + b) / 3
+
+
 #: Texture kinds: the key that names each in TOML -> its parser (sub-table, highest value).
 TEXTURES = {
     "checkerboard": _parse_checkerboard,
