@@ -240,7 +240,8 @@ to_world = [ { scale = [0.6, 0.6, 1] }, { translate = [-1.1, 1, 0] } ]
 [[shapes]]
 type = "rectangle"
 material = "image"
-to_world = [ { scale = [0.6, 0.6, 1] }, { rotate = { axis = [0, 1, 0], angle = -25 } }, { translate = [0.2, 1, 0] } ]
+to_world = [ { scale = [0.6, 0.6, 1] }, { rotate = { axis = [0, 1, 0], angle = -25 } },
+             { translate = [0.2, 1, 0] } ]
 [[shapes]]
 type = "sphere"
 center = [1.3, 0.7, 0.2]
