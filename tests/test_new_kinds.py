@@ -301,3 +301,21 @@ def test_textured_opacity_looked_up_wrongly_is_caught(tmp_path, fault):
     with faults.active(fault):
         result, _, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
     assert not result.passed
+
+
+@pytest.mark.parametrize("colour", [(0.2, 0.5, 0.9), (1.0, 0.0, 0.25), (0.7, 0.7, 0.7)])
+def test_colour_opacity_is_the_value_mitsubas_mask_reads(mi, colour):
+    # The conversion hands Mitsuba the one value (a float), so the cross-render above
+    # cannot tell a wrong reading of a colour: here Mitsuba's own mask is asked, by its
+    # null transmission 1 - opacity, for the opacity of an rgb colour. Tolerance: four
+    # float32 roundings on Mitsuba's side (the mean's sum and division, 1 - o, and
+    # 1 - that here), each at most 2^-24 of a value up to 1.
+    import drjit as dr
+
+    from tracer.materials.textures import scalar_texture
+
+    mask = mi.load_dict({"type": "mask", "opacity": {"type": "rgb", "value": colour},
+                         "material": {"type": "diffuse"}})
+    si = dr.zeros(mi.SurfaceInteraction3f, 1)
+    through = mask.eval_null_transmission(si)
+    assert abs((1 - through.x[0]) - scalar_texture(colour)) <= 4 * 2.0 ** -24
