@@ -196,8 +196,18 @@ def pixel_relative_difference(test: np.ndarray, ref: np.ndarray) -> np.ndarray:
     return num / np.maximum(den, floor)
 
 
+def block_pixels(image: np.ndarray, k: int = BLOCK) -> int:
+    """Pixels in one block of :func:`block_mean`: k x k, or the whole image when it is
+    narrower or lower than one block."""
+    h, w = image.shape[:2]
+    return h * w if h < k or w < k else k * k
+
+
 def block_mean(image: np.ndarray, k: int = BLOCK) -> np.ndarray:
-    """Mean over k x k pixel blocks (the image cropped to a multiple of k)."""
+    """Mean over k x k pixel blocks (the image cropped to a multiple of k); an image
+    smaller than one block in either direction is one block."""
+    if image.shape[0] < k or image.shape[1] < k:
+        return image.astype(np.float64).reshape(1, 1, -1, image.shape[-1]).mean(axis=2)
     h, w = (image.shape[0] // k) * k, (image.shape[1] // k) * k
     a = image[:h, :w].astype(np.float64)
     return a.reshape(h // k, k, w // k, k, -1).mean(axis=(1, 3))
@@ -372,9 +382,8 @@ def block_metrics(test: np.ndarray, ref: np.ndarray, var: np.ndarray | None = No
     rel = pixel_relative_difference(bt, br)
     beyond = rel > 0.05
     if var is not None:
-        k = BLOCK
         v = _channel_sum_variance(var)[..., None]
-        sigma_block = np.sqrt(block_mean(v)[..., 0] / (k * k))  # Var(mean of k*k pixels)
+        sigma_block = np.sqrt(block_mean(v)[..., 0] / block_pixels(v))  # Var of a mean
         diff = np.abs(bt.astype(np.float64) - br).sum(-1)
         beyond &= diff > BLOCK_SIGMAS * sigma_block
     return {"block_median_rel": float(np.median(rel)),

@@ -568,3 +568,21 @@ def test_a_full_stdout_is_one_line_not_a_traceback(tmp_path):
                            stderr=subprocess.PIPE, text=True)
     assert r.returncode == 2 and len(r.stderr.strip().split("\n")) == 1, r.stderr
     assert "standard output" in r.stderr and "Traceback" not in r.stderr
+
+
+def test_compare_of_an_image_smaller_than_a_block(tmp_path):
+    """An image lower or narrower than the 4 x 4 blocks of the statistical verdict is one
+    block (found by the long command-line fuzzer: `compare --size 4x3` on an area-lit
+    scene raised a ValueError in the block means)."""
+    import numpy as np
+
+    from reference.compare import block_mean, block_metrics, block_pixels
+
+    a = np.arange(36, dtype=np.float32).reshape(3, 4, 3)
+    assert block_mean(a).shape == (1, 1, 3) and block_pixels(a) == 12
+    np.testing.assert_allclose(block_mean(a)[0, 0], a.reshape(-1, 3).mean(0))
+    m = block_metrics(a, a, np.ones_like(a))
+    assert m["block_frac_over_5pct"] == 0.0
+    code, out, err = cli("compare", "area_lights", "--size", "4x3", "--spp", "1",
+                         "--max-depth", "1", "-o", str(tmp_path / "c"))
+    assert code in (0, 1) and "Traceback" not in err, err
