@@ -29,3 +29,18 @@ def any_up(axis) -> np.ndarray:
     a = np.asarray(axis, dtype=np.float64)
     return np.array([0.0, 1.0, 0.0]) if abs(a[1]) < 0.9 * np.linalg.norm(a) else \
         np.array([1.0, 0, 0])
+
+
+def per_variant(define):
+    """``plugin_class(mi)``: the class ``define(mi)`` makes for Mitsuba's current variant,
+    defined once per variant (a plugin written on Mitsuba's API subclasses the variant's
+    ``mi.BSDF`` or ``mi.Emitter``, so each variant needs its own class)."""
+    classes: dict = {}
+
+    def plugin_class(mi):
+        variant = mi.variant()
+        if variant not in classes:
+            classes[variant] = define(mi)
+        return classes[variant]
+
+    return plugin_class

@@ -17,7 +17,7 @@ from __future__ import annotations
 import drjit as dr
 
 from reference.emitters.heckbert import constant_color
-from reference.mitsuba_tree import rgb
+from reference.mitsuba_tree import per_variant, rgb
 from tracer.emitters.background import Background
 
 #: the Mitsuba plugins this module registers
@@ -34,14 +34,7 @@ def register(mi) -> None:
     mi.register_emitter("whitted_background", lambda props: cls(props))
 
 
-_classes: dict = {}
-
-
-def plugin_class(mi):
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define(mi)
-    return _classes[variant]
+plugin_class = per_variant(lambda mi: _define(mi))
 
 
 def _define(mi):

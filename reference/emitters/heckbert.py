@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import drjit as dr
 
-from reference.mitsuba_tree import rgb
+from reference.mitsuba_tree import per_variant, rgb
 from tracer.emitters.heckbert import HeckbertSphere
 
 #: the Mitsuba plugins this module registers
@@ -60,14 +60,7 @@ def constant_color(mi, props, name: str):
     return mi.Color3f(tex.eval(dr.zeros(mi.SurfaceInteraction3f)))
 
 
-_classes: dict = {}
-
-
-def plugin_class(mi):
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define(mi)
-    return _classes[variant]
+plugin_class = per_variant(lambda mi: _define(mi))
 
 
 def _define(mi):

@@ -51,6 +51,7 @@ import drjit as dr
 
 from reference.materials.phong import _color_texture
 from reference.materials.textures import texture_tree
+from reference.mitsuba_tree import per_variant
 from tracer.materials.classic import Classic
 
 #: the Mitsuba plugins this module registers
@@ -69,15 +70,8 @@ def register(mi) -> None:
     mi.register_bsdf("whitted_classic", lambda props: cls(props))
 
 
-_classes: dict = {}
-
-
-def plugin_class(mi):
-    """The ``whitted_classic`` BSDF class for Mitsuba's current variant."""
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define(mi)
-    return _classes[variant]
+#: The ``whitted_classic`` BSDF class for Mitsuba's current variant.
+plugin_class = per_variant(lambda mi: _define(mi))
 
 
 def _define(mi):

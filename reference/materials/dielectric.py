@@ -51,6 +51,7 @@ from __future__ import annotations
 
 import drjit as dr
 
+from reference.mitsuba_tree import per_variant
 from tracer.errors import UserError
 from tracer.materials.dielectric import Dielectric
 
@@ -84,15 +85,8 @@ def register(mi) -> None:
     mi.register_bsdf("whitted_schlick", lambda props: cls(props))
 
 
-_classes: dict = {}
-
-
-def plugin_class(mi):
-    """The ``whitted_schlick`` BSDF class for Mitsuba's current variant."""
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define(mi)
-    return _classes[variant]
+#: The ``whitted_schlick`` BSDF class for Mitsuba's current variant.
+plugin_class = per_variant(lambda mi: _define(mi))
 
 
 def _define(mi):

@@ -55,7 +55,7 @@ import math
 import drjit as dr
 
 from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import rgb
+from reference.mitsuba_tree import per_variant, rgb
 from tracer.materials.phong import Phong
 
 MODELS = ("phong", "blinn-phong")
@@ -93,15 +93,8 @@ def _cos_power(c, p):
     return dr.select(c > 0, dr.power(dr.maximum(c, 1e-30), p), 0.0)
 
 
-_classes: dict = {}
-
-
-def plugin_class(mi):
-    """The ``whitted_phong`` BSDF class for Mitsuba's current variant."""
-    variant = mi.variant()
-    if variant not in _classes:
-        _classes[variant] = _define(mi)
-    return _classes[variant]
+#: The ``whitted_phong`` BSDF class for Mitsuba's current variant.
+plugin_class = per_variant(lambda mi: _define(mi))
 
 
 def _define(mi):
