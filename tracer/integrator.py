@@ -93,25 +93,46 @@ class RenderResult:
 
 @dataclass
 class _Batch:
-    """Rays of one recursion level: state carried from level to level."""
+    """Rays of one recursion level: state carried from level to level.
+
+    Only what a level cannot recompute is carried (and copied by each level's
+    compaction): the ray, its weight, its sample's slot in the chunk and, with
+    an expression, its automaton state. The pixel and the sample within it
+    follow from the slot, since a chunk holds ``spp`` consecutive samples per
+    pixel from pixel ``first``; rays after the first level have no tmax.
+    """
     o: object
     d: object
-    tmax: object
     weight: object
-    pixel: object   # global pixel index
-    s: object       # sample index within the pixel
     slot: object    # index of the sample in the chunk's radiance buffer
     state: object = None  # light-path-expression DFA state (only with an expression)
+    first: int = 0  # the chunk's first pixel
+    spp: int = 1
+    tmax: object = None  # None: unbounded
 
-    FIELDS = ("o", "d", "tmax", "weight", "pixel", "s", "slot", "state")
+    FIELDS = ("o", "d", "weight", "slot", "state")
+
+    @property
+    def pixel(self):
+        """Global pixel index of each ray's sample."""
+        return self.slot // self.spp + dr.opaque(jit.UInt32, self.first)
+
+    @property
+    def s(self):
+        """Index of each ray's sample within its pixel."""
+        return self.slot % self.spp
 
     def size(self) -> int:
         return dr.width(self.slot)
 
+    def like(self, fields: list) -> _Batch:
+        """A batch of this chunk with other field values (in FIELDS order)."""
+        return _Batch(*fields, first=self.first, spp=self.spp)
+
     def gather(self, index) -> _Batch:
-        return _Batch(*(None if getattr(self, f) is None else
-                        dr.gather(type(getattr(self, f)), getattr(self, f), index)
-                        for f in self.FIELDS))
+        return self.like([None if getattr(self, f) is None else
+                          dr.gather(type(getattr(self, f)), getattr(self, f), index)
+                          for f in self.FIELDS])
 
     def split(self, cap: int) -> list[_Batch]:
         n = self.size()
@@ -120,27 +141,81 @@ class _Batch:
         return [self.gather(dr.arange(jit.UInt32, a, min(a + cap, n))) for a in range(0, n, cap)]
 
 
-def _concat(parts: list[_Batch]) -> _Batch | None:
-    parts = [p for p in parts if p is not None and p.size() > 0]
-    if not parts:
+class _Radiance:
+    """A chunk's radiance per sample: the camera level writes it, later levels add to it.
+
+    The camera level holds every sample once, in slot order, so its light is the
+    buffer itself; adding it with a scatter would cost a cleared buffer, a
+    per-thread copy and a reduction for nothing. A later level's light is
+    evaluated with the level's kernel and added by a scatter of its own
+    (:meth:`commit`): on the CPU, a scatter-add inside the large shading kernel
+    made that kernel 1.6x slower than the two kernels together
+    (benchmarks/bench_speed.py recursion).
+    """
+
+    def __init__(self):
+        self.value = None
+        self._pending = None
+
+    def add(self, contrib, slot) -> None:
+        if self.value is None:  # the camera level: slot = 0, 1, ..., n - 1
+            self.value = contrib + 0  # a variable of its own (contrib may be a literal)
+        else:
+            self._pending = (contrib, slot)
+
+    def outputs(self) -> tuple:
+        """What the level's kernel must evaluate."""
+        return (self.value,) if self._pending is None else (self._pending[0],)
+
+    def commit(self) -> None:
+        if self._pending is not None:
+            contrib, slot = self._pending
+            self._pending = None
+            dr.scatter_reduce(dr.ReduceOp.Add, self.value, contrib, slot)
+
+
+def _split_index(i, n: int, k: int):
+    """(i // n, i % n) for i < k n, by comparisons: a vector integer division costs more."""
+    which = dr.zeros(jit.UInt32, dr.width(i))
+    for m in range(1, k):
+        which += dr.select(i >= m * n, jit.UInt32(1), jit.UInt32(0))
+    return which, i - which * n
+
+
+def _compact(children: list) -> _Batch | None:
+    """The next level: the kept rays of every child batch, in order, in two kernels.
+
+    Children are (batch, keep) pairs of equal width n; one compress over their
+    keep masks read as a single array of width k n gives the kept positions, and
+    one kernel gathers every field from the child each position falls in.
+    """
+    n = children[0][0].size()
+    if len(children) == 1:
+        idx = dr.compress(children[0][1])
+    else:
+        which, j = _split_index(dr.arange(jit.UInt32, n * len(children)), n, len(children))
+        keep = jit.Bool(False)
+        for k, (_, kp) in enumerate(children):
+            keep = dr.select(which == k, dr.gather(jit.Bool, kp, j), keep)
+        idx = dr.compress(keep)
+    if dr.width(idx) == 0:
         return None
-    if len(parts) == 1:
-        return parts[0]
+    which, j = _split_index(idx, n, len(children))
     out = []
     for f in _Batch.FIELDS:
-        vals = [getattr(p, f) for p in parts]
-        t = type(vals[0])
-        if vals[0] is None:
+        first = getattr(children[0][0], f)
+        if first is None:
             out.append(None)
-        elif dr.size_v(t) == 3:
-            out.append(t(*(dr.concat([v[k] for v in vals]) for k in range(3))))
-        else:
-            out.append(dr.concat(vals))
-    return _Batch(*out)
-
-
-def _count(masks) -> int:
-    return sum(int(dr.count(m)[0]) for m in masks)
+            continue
+        t = type(first)
+        v = dr.gather(t, first, j, which == 0)
+        for k in range(1, len(children)):  # each lane reads from its own child only
+            mine = which == k
+            v = dr.select(mine, dr.gather(t, getattr(children[k][0], f), j, mine), v)
+        out.append(v)
+    nxt = children[0][0].like(out)
+    dr.eval(*(x for x in out if x is not None))
+    return nxt
 
 
 class Integrator:
@@ -192,11 +267,16 @@ class Integrator:
 
     # ------------------------------------------------------------------ one level
 
-    def _level(self, b: _Batch, depth: int, L) -> tuple[_Batch | None, int]:
-        """Trace one level; add its light to L; return the next level and the shadow-ray count."""
+    def _level(self, b: _Batch, depth: int, L: _Radiance) -> tuple[_Batch | None, object]:
+        """Trace one level; add its light to L; return the next level and the level's tally.
+
+        The tally (a UInt64 array of one element, read when the render ends, so
+        that no level waits for it) holds the shadow rays cast in its high 32 bits
+        and the rays whose weight is significant in its low 32 bits.
+        """
         scene, geo = self.scene, self.geo
         max_depth = scene.film.max_depth
-        hit: Hit = geo.closest_hit(b.o, b.d, b.tmax)
+        hit: Hit = geo.closest_hit(b.o, b.d, dr.inf if b.tmax is None else b.tmax)
         valid = hit.valid
         surf = geo.surface(hit, b.o, b.d)
         p, n, n_sh = surf.p, surf.n, surf.ns
@@ -270,19 +350,21 @@ class Integrator:
             if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):
                 children = self._delta(b, mats, si, off)
 
-        dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, b.slot)
-        if children is None:
-            dr.eval(L, *shadow_masks)      # one kernel: intersection, shading, shadow rays
-            return None, _count(shadow_masks)
-        dr.eval(L, *shadow_masks, *(x for c, keep in children
-                                    for x in (c.o, c.d, c.weight, keep, c.state)
-                                    if x is not None))
-        nxt = _concat([c.gather(dr.compress(keep)) for c, keep in children])
-        return nxt, _count(shadow_masks)
+        L.add(contrib, b.slot)
+        # The level's statistics as one count per lane, summed without waiting for them:
+        # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
+        tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1), jit.UInt64(0))
+        for m in shadow_masks:
+            tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
+        # One kernel: intersection, shading, shadow rays and the next level's rays.
+        dr.eval(*L.outputs(), tally, *(x for c, keep in children or ()
+                                       for x in (c.o, c.d, c.weight, keep, c.state)
+                                       if x is not None))
+        L.commit()
+        return (None if children is None else _compact(children)), dr.sum(tally)
 
     def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
         """The next level's rays: one batch per delta-lobe slot, and which of them to keep."""
-        far = dr.full(jit.Float, dr.inf, b.size())
         states: dict = {}
         out = []
         for slot in mats.delta_lobes(b.weight):
@@ -297,7 +379,7 @@ class Integrator:
                 w = dr.select(state != 0, w, 0)
             # Origins leave the surface on the side each new direction goes to.
             side = dr.select(dr.dot(si.ng, slot.d) >= 0, si.ng, -si.ng)
-            child = _Batch(dr.fma(side, off, si.p), slot.d, far, w, b.pixel, b.s, b.slot, state)
+            child = b.like([dr.fma(side, off, si.p), slot.d, w, b.slot, state])
             out.append((child, dr.max(w) > self.min_weight))
         return out
 
@@ -332,6 +414,7 @@ class Integrator:
         rays = [0] * max_depth
         shadow = [0] * max_depth
         significant = [0] * max_depth
+        tallies: list[list] = [[] for _ in range(max_depth)]  # _level's sums, read at the end
         start = time.perf_counter()
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
@@ -340,34 +423,37 @@ class Integrator:
                 u = jitter_2d(pixel, s, self.seed)
                 fx, fy = fx + (u.x - 0.5) * (1.0 / n), fy + (u.y - 0.5) * (1.0 / n)
             o, d, tmax = generate_rays(scene.camera, W, H, fx, fy)
-            L = dr.zeros(jit.Array3f, count * spp)
+            radiance = _Radiance()
             slot = dr.arange(jit.UInt32, count * spp)
             ones = dr.full(jit.Array3f, 1.0, count * spp)
             state = None
             if self.dfa is not None:  # every path ends at the eye: read E first
                 state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), count * spp)
-            stack = [(1, _Batch(o, d, tmax, ones, pixel, s, slot, state))]
+            stack = [(1, _Batch(o, d, ones, slot, state, first, spp, tmax))]
             while stack:
                 depth, batch = stack.pop()
                 rays[depth - 1] += batch.size()
-                significant[depth - 1] += int(dr.count(dr.max(batch.weight) >
-                                                       SIGNIFICANT_WEIGHT)[0])
-                nxt, n_shadow = self._level(batch, depth, L)
-                shadow[depth - 1] += n_shadow
+                nxt, tally = self._level(batch, depth, radiance)
+                tallies[depth - 1].append(tally)
                 if nxt is not None and depth < max_depth:
                     for part in reversed(nxt.split(self.chunk_samples)):
                         stack.append((depth + 1, part))
             if splat is not None:
-                splat.add(L.numpy().T, fx.numpy(), fy.numpy())
+                splat.add(radiance.value.numpy().T, fx.numpy(), fy.numpy())
                 if progress is not None:
                     progress(first + count, total)
                 continue
+            L = radiance.value
             px = dr.block_sum(L, spp) * (1.0 / spp)
             image[first:first + count] = px.numpy().T
             if second is not None:
                 second[first:first + count] = (dr.block_sum(L * L, spp) * (1.0 / spp)).numpy().T
             if progress is not None:
                 progress(first + count, total)
+        for k, sums in enumerate(tallies):
+            for v in (int(x) for x in dr.concat(sums).numpy()) if sums else ():
+                shadow[k] += v >> 32
+                significant[k] += v & 0xFFFFFFFF
         variance = None
         if splat is not None:
             image, variance = splat.image(moments)
