@@ -43,6 +43,15 @@ pixels within the filter's radius (:func:`splat_gaussian`).
 
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
 that grows beyond the chunk size is split and processed depth-first.
+
+Each level costs a few kernels, and none waits on the host except the
+compaction (which must know the next level's size): one kernel traces,
+shades, casts the shadow rays and writes the next level's candidate rays; a
+scatter adds the level's light to its samples (the camera level writes it
+directly, :class:`_Radiance`); one compress and one gather build the next
+level from every child batch at once (:func:`_compact`); the level's ray
+counts are summed on the device and read when the render ends. A batch
+carries only what cannot be recomputed (ray, weight, sample slot).
 """
 
 from __future__ import annotations
