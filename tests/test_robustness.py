@@ -547,9 +547,12 @@ def test_many_instances_convert_to_mitsuba(mi):
 
 def test_interrupted_depth_sweep_leaves_no_partial_folder(tmp_path):
     out = tmp_path / "sweep"
+    # Ctrl-C as at a terminal: a shell that started this run in the background without job
+    # control leaves SIGINT ignored, and a child inherits that (it then never sees the signal).
     p = subprocess.Popen([sys.executable, "-m", "reference.cli", "depth-sweep",
                           "heckbert_minray", "--depths", "1-60", "--no-mitsuba", "-o", str(out)],
-                         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+                         cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     line = p.stdout.readline()
     while line and not line.startswith("DEPTH"):
         line = p.stdout.readline()
