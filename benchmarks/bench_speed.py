@@ -210,6 +210,25 @@ def _minray_rate(size: int, depth: int, repeat: int, count: int) -> float | None
     return secs
 
 
+def _kernel_figures(integ) -> None:
+    """One more render with Dr.Jit's kernel history: how many kernels, and where the time goes."""
+    import drjit as dr
+
+    dr.kernel_history_clear()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    try:
+        integ.render()
+        history = dr.kernel_history()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    ms = [k.get("execution_time", 0.0) / 1000 for k in history]
+    # a level's own kernel (tracing, shading, shadow rays) has over a thousand operations;
+    # the rest are the scatters, compactions and sums between levels
+    big = sum(t for k, t in zip(history, ms, strict=True) if k.get("operation_count", 0) > 1000)
+    print(f"  kernels per render {len(history):,}; executing {sum(ms):.3f} s, of which "
+          f"{big:.3f} s in the levels' tracing and shading kernels (dr.kernel_history)")
+
+
 def cmd_recursion(args) -> int:
     from reference.cli import resolve_scene
     from reference.minray import ray_count
@@ -232,6 +251,7 @@ def cmd_recursion(args) -> int:
     t = statistics.median(times)
     peak = self_peak()  # before minray's count, which is computed in numpy
     ours = res.rays_total
+    _kernel_figures(integ)
     mr = ray_count(scene.with_overrides(spp=1), depth)  # minray: one ray a pixel
     print(f"  rays: tracer {ours:,} ({sum(res.rays_per_level):,} + "
           f"{sum(res.shadow_rays_per_level):,} shadow), minray {mr.total:,} "

@@ -34,8 +34,9 @@ def test_compact_keeps_each_child_in_order(k):
         np.testing.assert_array_equal(getattr(out, f).numpy(), np.concatenate(want[f], axis=1))
     np.testing.assert_array_equal(out.slot.numpy(), np.concatenate(want["slot"]))
     # the pixel and sample of each ray follow from its slot
-    np.testing.assert_array_equal(out.pixel.numpy(), out.slot.numpy() // 4 + 7)
-    np.testing.assert_array_equal(out.s.numpy(), out.slot.numpy() % 4)
+    pixel, sample = out.pixel_and_sample()
+    np.testing.assert_array_equal(pixel.numpy(), out.slot.numpy() // 4 + 7)
+    np.testing.assert_array_equal(sample.numpy(), out.slot.numpy() % 4)
 
 
 def test_compact_nothing_kept():

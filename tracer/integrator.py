@@ -70,7 +70,7 @@ from tracer.emitters import area, scene_emitters
 from tracer.geometry import Geometry, Hit, spawn_offset
 from tracer.materials.base import ShadingPoint
 from tracer.materials.dispatch import SceneMaterials
-from tracer.sampling import jitter_2d, light_sample, pixel_samples, seed32
+from tracer.sampling import jitter_2d, light_sample, pixel_and_sample, pixel_samples, seed32
 from tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
@@ -121,15 +121,9 @@ class _Batch:
 
     FIELDS = ("o", "d", "weight", "slot", "state")
 
-    @property
-    def pixel(self):
-        """Global pixel index of each ray's sample."""
-        return self.slot // self.spp + dr.opaque(jit.UInt32, self.first)
-
-    @property
-    def s(self):
-        """Index of each ray's sample within its pixel."""
-        return self.slot % self.spp
+    def pixel_and_sample(self):
+        """(global pixel index, sample index within the pixel) of each ray's sample."""
+        return pixel_and_sample(self.slot, self.spp, self.first)
 
     def size(self) -> int:
         return dr.width(self.slot)
@@ -157,9 +151,10 @@ class _Radiance:
     buffer itself; adding it with a scatter would cost a cleared buffer, a
     per-thread copy and a reduction for nothing. A later level's light is
     evaluated with the level's kernel and added by a scatter of its own
-    (:meth:`commit`): on the CPU, a scatter-add inside the large shading kernel
-    made that kernel 1.6x slower than the two kernels together
-    (benchmarks/bench_speed.py recursion).
+    (:meth:`commit`): on the CPU, with the scatter-add inside it, the level
+    kernels of Heckbert's scene (256x256, 16 spp, DEPTH 25) took 0.33 s a
+    render; without it 0.20 s, and the separate scatters 0.11 s (Dr.Jit's kernel
+    history, as ``benchmarks/bench_speed.py recursion`` prints it).
     """
 
     def __init__(self):
@@ -191,6 +186,16 @@ def _split_index(i, n: int, k: int):
     return which, i - which * n
 
 
+def _own_child(values: list, which, j):
+    """Per lane, ``values[which][j]``: each lane reads (a masked gather) from its own child only."""
+    t = type(values[0])
+    v = dr.gather(t, values[0], j, which == 0)
+    for k in range(1, len(values)):
+        mine = which == k
+        v = dr.select(mine, dr.gather(t, values[k], j, mine), v)
+    return v
+
+
 def _compact(children: list) -> _Batch | None:
     """The next level: the kept rays of every child batch, in order, in two kernels.
 
@@ -198,33 +203,20 @@ def _compact(children: list) -> _Batch | None:
     keep masks read as a single array of width k n gives the kept positions, and
     one kernel gathers every field from the child each position falls in.
     """
-    n = children[0][0].size()
-    if len(children) == 1:
-        idx = dr.compress(children[0][1])
+    n, k = children[0][0].size(), len(children)
+    masks = [keep for _, keep in children]
+    if k == 1:  # the mask itself: no kernel to read it as one array
+        idx = dr.compress(masks[0])
     else:
-        which, j = _split_index(dr.arange(jit.UInt32, n * len(children)), n, len(children))
-        keep = jit.Bool(False)
-        for k, (_, kp) in enumerate(children):
-            keep = dr.select(which == k, dr.gather(jit.Bool, kp, j), keep)
-        idx = dr.compress(keep)
+        idx = dr.compress(_own_child(masks, *_split_index(dr.arange(jit.UInt32, n * k), n, k)))
     if dr.width(idx) == 0:
         return None
-    which, j = _split_index(idx, n, len(children))
-    out = []
-    for f in _Batch.FIELDS:
-        first = getattr(children[0][0], f)
-        if first is None:
-            out.append(None)
-            continue
-        t = type(first)
-        v = dr.gather(t, first, j, which == 0)
-        for k in range(1, len(children)):  # each lane reads from its own child only
-            mine = which == k
-            v = dr.select(mine, dr.gather(t, getattr(children[k][0], f), j, mine), v)
-        out.append(v)
-    nxt = children[0][0].like(out)
+    which, j = _split_index(idx, n, k)
+    out = [None if getattr(children[0][0], f) is None else
+           _own_child([getattr(c, f) for c, _ in children], which, j)
+           for f in _Batch.FIELDS]
     dr.eval(*(x for x in out if x is not None))
-    return nxt
+    return children[0][0].like(out)
 
 
 class Integrator:
@@ -337,8 +329,8 @@ class Integrator:
                 for light in self.illuminating:
                     u = None
                     if not light.delta:
-                        u = light_sample(b.pixel, b.s, scene.film.strata, self.seed, depth,
-                                         light.index)
+                        u = light_sample(*b.pixel_and_sample(), scene.film.strata, self.seed,
+                                         depth, light.index)
                     wi, dist, e = light.sample(p, p_front, u)
                     cos = lights.lambert_cosine(nl, wi)
                     f = mats.eval(wi)

@@ -53,6 +53,13 @@ def mix32(*values: int) -> int:
     return h
 
 
+def pixel_and_sample(idx, spp: int, first_pixel: int):
+    """(global pixel index, sample index within the pixel) of sample ``idx`` of a chunk
+    whose pixels start at ``first_pixel``, ``spp`` consecutive samples per pixel."""
+    local_pixel = idx // spp
+    return local_pixel + dr.opaque(jit.UInt32, first_pixel), idx - local_pixel * spp
+
+
 def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
     """(global pixel index, sample index within the pixel, film x, film y) for a range of pixels.
 
@@ -60,10 +67,7 @@ def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
     so a per-pixel mean is a block reduction.
     """
     spp = n * n
-    idx = dr.arange(jit.UInt32, pixel_count * spp)
-    local_pixel = idx // spp
-    s = idx - local_pixel * spp
-    pixel = local_pixel + dr.opaque(jit.UInt32, first_pixel)
+    pixel, s = pixel_and_sample(dr.arange(jit.UInt32, pixel_count * spp), spp, first_pixel)
     px = pixel % width
     py = pixel // width
     sy = s // n
