@@ -131,7 +131,7 @@ def main(argv=None) -> int:
         t_tracer = timed(integ.render)
         t_mitsuba = timed(run_mitsuba)
     print(f"mesh: {len(f):,} triangles; scene {w}x{h}, {spp} spp, backend {name}")
-    print(f"  BVH build (numpy)          {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes)"
+    print(f"  BVH build (Dr.Jit)         {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes)"
           f"; scene load incl. PLY {load_s:.3f} s; Mitsuba scene load {mi_load_s:.3f} s")
     for suffix, (cold, warm, size) in parse.items():
         print(f"  mesh file {suffix} ({size / 1e6:.1f} MB)   parsed {cold:8.4f} s, loaded again "

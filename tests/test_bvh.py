@@ -122,9 +122,15 @@ def check_tree(b, p0, p1, p2, max_leaf):
                                                                       strict=True)])]
     for p in (p0, p1, p2):
         assert (p[tri] >= b.lo[owner]).all() and (p[tri] <= b.hi[owner]).all()
-    # The root holds everything; the depth is the longest root-to-leaf path.
-    np.testing.assert_array_equal(b.lo[0], np.minimum(np.minimum(p0, p1), p2).min(0))
-    np.testing.assert_array_equal(b.hi[0], np.maximum(np.maximum(p0, p1), p2).max(0))
+    # The root holds everything, and no more than float32 rounding outwards adds: the
+    # smallest float32 box around the float64 corners. The depth is the longest
+    # root-to-leaf path.
+    lo, hi = np.minimum(np.minimum(p0, p1), p2).min(0), np.maximum(np.maximum(p0, p1), p2).max(0)
+    assert b.lo.dtype == b.hi.dtype == np.float32
+    np.testing.assert_array_equal(b.lo[0], np.where(lo.astype(np.float32) > lo, np.nextafter(
+        lo.astype(np.float32), np.float32(-np.inf)), lo.astype(np.float32)))
+    np.testing.assert_array_equal(b.hi[0], np.where(hi.astype(np.float32) < hi, np.nextafter(
+        hi.astype(np.float32), np.float32(np.inf)), hi.astype(np.float32)))
     depth = np.zeros(len(b.left), int)
     for i in np.flatnonzero(inner):  # parents come before children (depth-first order)
         depth[b.left[i]] = depth[b.right[i]] = depth[i] + 1
@@ -149,6 +155,31 @@ def test_tree_invariants_hold_for_coincident_triangles_split_by_median():
     p2 = np.tile([0, 1.0, 0], (50, 1))
     b = build_bvh(p0, p1, p2, max_leaf=3)
     check_tree(b, p0, p1, p2, 3)
+
+
+def test_boxes_are_the_smallest_float32_boxes_around_the_corners():
+    # Corners on float32 values, between them, either side of zero and far from the
+    # origin: each leaf's box is the nearest float32 rounded outwards, never inwards
+    # (numpy's nextafter decides). Dr.Jit's CPU kernels treat subnormal floats as zero,
+    # so a bound below the smallest normal float32 in size is 0 or +-2^-126 outwards.
+    vals = np.array([0.0, 1.0, -1.0, 0.1, -0.1, 1e-50, -1e-50, 3e38, -3e38, 1 + 2.0**-30,
+                     -(1 + 2.0**-30), 16777217.0, 2.0**-140 / 3])
+    rng = np.random.default_rng(5)
+    p0, p1, p2 = (rng.choice(vals, size=(40, 3)) for _ in range(3))
+    b = build_bvh(p0, p1, p2, max_leaf=1)
+    leaf = b.left < 0
+    tri = b.order[b.start[leaf]]
+    lo = np.minimum(np.minimum(p0, p1), p2)[tri]
+    hi = np.maximum(np.maximum(p0, p1), p2)[tri]
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
+    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
+    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
+    tiny = np.float32(2.0**-126)
+    lo32 = np.where(np.abs(lo32) < tiny, np.where(lo < 0, -tiny, 0), lo32)
+    hi32 = np.where(np.abs(hi32) < tiny, np.where(hi > 0, tiny, 0), hi32)
+    np.testing.assert_array_equal(b.lo[leaf], lo32)
+    np.testing.assert_array_equal(b.hi[leaf], hi32)
+    assert (b.lo[leaf] <= lo).all() and (b.hi[leaf] >= hi).all()
 
 
 def test_torus_tree_invariants_and_build_time(record_property):

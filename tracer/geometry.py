@@ -33,7 +33,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from tracer import faults
+from tracer import backend, faults
 from tracer.backend import jit
 from tracer.scene import (
     Cylinder,
@@ -165,7 +165,7 @@ class _TableBlock(_Block):
             return self._unrolled(o, d, t, prim)
         return self._looped(o, d, t, prim, active)
 
-    @dr.syntax
+    @backend.syntax
     def _looped(self, o, d, t, prim, active):
         i = jit.UInt32(0)
         count = dr.opaque(jit.UInt32, self.count)
@@ -517,7 +517,7 @@ class _InstanceSetBlock(_Block):
     def intersect(self, o, d, t, prim, active):
         return self._loop(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, dr.width(t)))
 
-    @dr.syntax
+    @backend.syntax
     def _loop(self, o, d, t, prim, alive):
         from tracer.bvh import COUNT_BITS, GAMMA3, LEAF_FLAG
 
@@ -699,7 +699,7 @@ class Geometry:
         """True where something blocks the segment from o along d shorter than tmax."""
         return self.closest_hit(o, d, tmax, active).valid
 
-    @dr.syntax
+    @backend.syntax
     def _masked(self, o, d, t, prim, active):
         # A loop that runs at most once: the packets without an active lane skip it.
         todo = jit.Bool(active)
