@@ -155,6 +155,14 @@ class _Radiance:
     kernels of Heckbert's scene (256x256, 16 spp, DEPTH 25) took 0.33 s a
     render; without it 0.20 s, and the separate scatters 0.11 s (Dr.Jit's kernel
     history, as ``benchmarks/bench_speed.py recursion`` prints it).
+
+    That scatter adds only the rays that found light (at a mirror or glass
+    surface most find none), each by an atomic add into the buffer
+    (``ReduceMode.Direct``). Dr.Jit's default on the CPU gives each thread a
+    cleared copy of the buffer and sums the copies afterwards, which cost about
+    2.5 ms a level at 2^19 samples, more than the adds themselves. Measured at
+    320x240, 64 spp (median of 3): glass_sphere 0.35 -> 0.25 s, whitted_1980
+    0.42 -> 0.28 s, tir_prisms 0.48 -> 0.36 s, emitter_in_glass unchanged.
     """
 
     def __init__(self):
@@ -175,7 +183,8 @@ class _Radiance:
         if self._pending is not None:
             contrib, slot = self._pending
             self._pending = None
-            dr.scatter_reduce(dr.ReduceOp.Add, self.value, contrib, slot)
+            dr.scatter_reduce(dr.ReduceOp.Add, self.value, contrib, slot, dr.any(contrib != 0),
+                              mode=dr.ReduceMode.Direct)
 
 
 def _split_index(i, n: int, k: int):
