@@ -363,15 +363,29 @@ class Integrator:
         L.add(contrib, b.slot)
         # The level's statistics as one count per lane, summed without waiting for them:
         # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
-        tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1), jit.UInt64(0))
-        for m in shadow_masks:
-            tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
+        # Camera rays all have weight 1, so all matter: their lanes count only shadow
+        # rays, in 32 bits where the sum fits (half the memory of the 64-bit tally; on
+        # three_lights, 800x480, 64 spp, the tally was about 6 % of the render).
+        n = b.size()
+        narrow = b.tmax is not None and len(shadow_masks) * n < (1 << 32)  # the camera's
+        if narrow:
+            tally = dr.zeros(jit.UInt32, n)
+            for m in shadow_masks:
+                tally += dr.select(m, jit.UInt32(1), jit.UInt32(0))
+        else:
+            tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1),
+                              jit.UInt64(0))
+            for m in shadow_masks:
+                tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
         # One kernel: intersection, shading, shadow rays and the next level's rays.
         dr.eval(*L.outputs(), tally, *(x for c, keep in children or ()
                                        for x in (c.o, c.d, c.weight, keep, c.state)
                                        if x is not None))
         L.commit()
-        return (None if children is None else _compact(children)), dr.sum(tally)
+        total = dr.sum(tally)
+        if narrow:  # shadow rays in the high bits; all n rays matter
+            total = (jit.UInt64(total) << 32) | n
+        return (None if children is None else _compact(children)), total
 
     def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
         """The next level's rays: one batch per delta-lobe slot, and which of them to keep."""
