@@ -316,19 +316,30 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         # The others to the left or right child, keeping their order.
         ax = dr.gather(U, best_axis, seg)
         c = (lo + hi) * 0.5
-        go_left = dr.select(dr.gather(B, no_sah, seg), r < dr.gather(U, cnt, seg) // 2,
-                            _bin(_component(c, ax),
-                                 _component(A3(*(dr.gather(F, v, seg) for v in c_lo)), ax),
-                                 _component(A3(*(dr.gather(F, v, seg) for v in scale)), ax),
-                                 dr.gather(U, nb, seg)) <= dr.gather(U, best_bin, seg))
-        go_left &= ~t_leaf
-        lefts = dr.prefix_sum(dr.select(go_left, U(1), U(0)))  # before each triangle
-        dr.eval(lefts, go_left, order)
-        # Lefts of a node: those before its end less those before its start.
+        by_bin = _bin(_component(c, ax),
+                      _component(A3(*(dr.gather(F, v, seg) for v in c_lo)), ax),
+                      _component(A3(*(dr.gather(F, v, seg) for v in scale)), ax),
+                      dr.gather(U, nb, seg)) <= dr.gather(U, best_bin, seg)
+        half = r < dr.gather(U, cnt, seg) // 2
         last = first + cnt - 1
-        n_left = (dr.gather(U, lefts, last) + dr.select(dr.gather(B, go_left, last), U(1), U(0))
-                  - dr.gather(U, lefts, first))
-        h_nl = n_left.numpy().astype(np.int64)
+        for attempt in range(2):
+            go_left = dr.select(dr.gather(B, no_sah, seg), half, by_bin) & ~t_leaf
+            lefts = dr.prefix_sum(dr.select(go_left, U(1), U(0)))  # before each triangle
+            dr.eval(lefts, go_left, order)
+            # Lefts of a node: those before its end less those before its start.
+            n_left = (dr.gather(U, lefts, last)
+                      + dr.select(dr.gather(B, go_left, last), U(1), U(0))
+                      - dr.gather(U, lefts, first))
+            h_nl = n_left.numpy().astype(np.int64)
+            # A split that leaves a child empty would repeat forever; the binning and
+            # this partition compute the same bins, but should they ever disagree, such
+            # a node is split in half instead (never seen: a guard, not a path).
+            empty = split & ((h_nl == 0) | (h_nl == h_cnt))
+            if attempt or not empty.any():
+                break
+            no_sah = no_sah | B(empty)
+        if empty.any():
+            raise RuntimeError("BVH build: a split left a child empty")
         split_first = np.cumsum(np.where(split, h_cnt, 0)) - np.where(split, h_cnt, 0)
         l_before = lefts - dr.gather(U, lefts, dr.gather(U, first, seg))
         t_nl = dr.gather(U, n_left, seg)
