@@ -239,9 +239,9 @@ CHUNK = 128
 def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
     """The tree's topology, level by level, split on the device (Dr.Jit).
 
-    Returns ``levels`` (one dict per level of node ids, children, and leaf
-    start and count, numpy) and ``order`` (triangle ids, leaf after leaf in the
-    order the leaves were made). Nodes are numbered level after level.
+    Returns ``levels`` (one dict per level, numpy: node ids, children, boxes,
+    and a leaf's start and count) and ``order`` (triangle ids, leaf after leaf
+    in the order the leaves were made). Nodes are numbered level after level.
 
     Each pass splits every node of a level at once; the triangles of a node are
     contiguous and nodes are in order. A small node (:data:`CHUNK` triangles or
