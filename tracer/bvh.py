@@ -381,7 +381,7 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, small):
     # Chunks' boxes, then each node's.
     k_lo, k_hi, k_clo, k_chi = _chunk_boxes(lo, hi, cf, cc, cs)
     dr.eval(k_lo, k_hi, k_clo, k_chi)
-    b_lo, b_hi, c_lo, c_hi = _sum_chunks(n_first, n_nc, 1, k_lo, k_hi, k_clo, k_chi)
+    b_lo, b_hi, c_lo, c_hi = _chunk_boxes(k_lo, k_hi, n_first, n_nc, centroids=(k_clo, k_chi))
     nb = U(bins)
     ext = c_hi - c_lo
     scale = A3(*(dr.select(ext[k] > 0, F(nb) / ext[k], 0.0) for k in range(3)))
@@ -414,8 +414,13 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, small):
 
 
 @backend.syntax
-def _chunk_boxes(lo, hi, first, cnt, stride=1):
-    """Per chunk (a lane): the box and the centroid box of triangles first + j stride, j < cnt."""
+def _chunk_boxes(lo, hi, first, cnt, stride=1, centroids=None):
+    """Per chunk (a lane): the box and the centroid box of boxes first + j stride, j < cnt.
+
+    The boxes are triangles' (their centroids are computed), or with
+    ``centroids`` = (c_lo, c_hi) chunks' boxes and centroid boxes, whose unions
+    give a node's.
+    """
     A3, U = jit.Array3f, jit.UInt32
     S = dr.width(first)
     b_lo, b_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
@@ -425,27 +430,12 @@ def _chunk_boxes(lo, hi, first, cnt, stride=1):
         k = first + j * stride
         tl = dr.gather(A3, lo, k)
         th = dr.gather(A3, hi, k)
-        c = (tl + th) * 0.5
+        if centroids is None:
+            cl = ch = (tl + th) * 0.5
+        else:
+            cl, ch = dr.gather(A3, centroids[0], k), dr.gather(A3, centroids[1], k)
         b_lo, b_hi = dr.minimum(b_lo, tl), dr.maximum(b_hi, th)
-        c_lo, c_hi = dr.minimum(c_lo, c), dr.maximum(c_hi, c)
-        j += 1
-    return b_lo, b_hi, c_lo, c_hi
-
-
-@backend.syntax
-def _sum_chunks(n_first, n_nc, stride, k_lo, k_hi, k_clo, k_chi):
-    """Per node (a lane): the union of its chunks' boxes (chunk i's at index i * stride)."""
-    A3, U = jit.Array3f, jit.UInt32
-    S = dr.width(n_first)
-    b_lo, b_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
-    c_lo, c_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
-    j = dr.zeros(U, S)
-    while j < n_nc:
-        k = (n_first + j) * stride
-        b_lo = dr.minimum(b_lo, dr.gather(A3, k_lo, k))
-        b_hi = dr.maximum(b_hi, dr.gather(A3, k_hi, k))
-        c_lo = dr.minimum(c_lo, dr.gather(A3, k_clo, k))
-        c_hi = dr.maximum(c_hi, dr.gather(A3, k_chi, k))
+        c_lo, c_hi = dr.minimum(c_lo, cl), dr.maximum(c_hi, ch)
         j += 1
     return b_lo, b_hi, c_lo, c_hi
 
