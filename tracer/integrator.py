@@ -379,7 +379,9 @@ class Integrator:
                             [[type(x) for x in part] for part in out[1:]]]
                 return out
 
-            def miss(valid):  # traced after shade, whose outputs it mirrors with zeros
+            def miss(valid):  # zeros shaped as shade's outputs
+                if not shape:  # a condition known to be false (no shapes): shade not traced
+                    shade(valid)
                 masks, flat = shape[2]
                 return (dr.zeros(jit.Array3f, b.size()),
                         tuple(dr.zeros(t, b.size()) for t in masks),
