@@ -504,14 +504,19 @@ class Integrator:
                         stack.append((depth + 1, part))
             if splat is not None:
                 splat.add(radiance.value.numpy().T, fx.numpy(), fy.numpy())
-                if progress is not None:
-                    progress(first + count, total)
-                continue
-            L = radiance.value
-            px = dr.block_sum(L, spp) * (1.0 / spp)
-            image[first:first + count] = px.numpy().T
-            if second is not None:
-                second[first:first + count] = (dr.block_sum(L * L, spp) * (1.0 / spp)).numpy().T
+            else:
+                L = radiance.value
+                image[first:first + count] = (dr.block_sum(L, spp) * (1.0 / spp)).numpy().T
+                if second is not None:
+                    second[first:first + count] = (
+                        dr.block_sum(L * L, spp) * (1.0 / spp)).numpy().T
+                del L
+            # The chunk's buffer is freed before the next chunk allocates its own, which
+            # Dr.Jit's allocator then hands the same memory instead of new pages to fault
+            # in: the first render of a process (three_lights, 640x480, 64 spp) spent
+            # 7-87 ms in its second chunk's kernel against 4 ms, and took 0.21-0.35 s
+            # against 0.18-0.19 s.
+            del radiance
             if progress is not None:
                 progress(first + count, total)
         for k, sums in enumerate(tallies):
