@@ -317,8 +317,6 @@ class Integrator:
             # 15 % faster at 320x240. With child rays to return, the if's merge of every
             # output costs more than it saves (emitter_in_glass 8 % slower, tir_prisms
             # 2.4x slower when later levels used it too), so there it runs unconditionally.
-            shape = []
-
             def shade(valid):
                 add = dr.zeros(jit.Array3f, b.size())
                 masks = []
@@ -372,33 +370,18 @@ class Integrator:
                         masks.append(active)
                 if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):
                     kids = self._delta(b, mats, si, off)
-                out = (add, tuple(masks), tuple(x for c, keep in kids or ()
-                                                for x in (c.o, c.d, c.weight, keep, c.state)
-                                                if x is not None))
-                shape[:] = [kids is not None, [c.state is not None for c, _ in kids or ()],
-                            [[type(x) for x in part] for part in out[1:]]]
-                return out
+                return add, tuple(masks), kids
 
-            def miss(valid):  # zeros shaped as shade's outputs
-                if not shape:  # a condition known to be false (no shapes): shade not traced
-                    shade(valid)
-                masks, flat = shape[2]
-                return (dr.zeros(jit.Array3f, b.size()),
-                        tuple(dr.zeros(t, b.size()) for t in masks),
-                        tuple(dr.zeros(t, b.size()) for t in flat))
-
-            add, masks, flat = (dr.if_stmt((valid,), valid, shade, miss)
-                                if b.tmax is not None and not self.materials.has_delta
-                                else shade(valid))
+            if b.tmax is not None and not self.materials.has_delta:  # no child rays here
+                n_lights = len(self.illuminating) if self.materials.has_smooth else 0
+                add, masks = dr.if_stmt(
+                    (valid,), valid, lambda v: shade(v)[:2],
+                    lambda v: (dr.zeros(jit.Array3f, b.size()),
+                               tuple(dr.zeros(jit.Bool, b.size()) for _ in range(n_lights))))
+            else:
+                add, masks, children = shade(valid)
             contrib += add
             shadow_masks = list(masks)
-            if shape[0]:
-                children, k = [], 0
-                for has_state in shape[1]:
-                    o, d, w, keep = flat[k:k + 4]
-                    state = flat[k + 4] if has_state else None
-                    k += 5 if has_state else 4
-                    children.append((b.like([o, d, w, b.slot, state]), keep))
 
         L.add(contrib, b.slot)
         # The level's statistics as one count per lane, summed without waiting for them:
