@@ -146,7 +146,7 @@ def build_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *, bins: int = 16,
     if not (np.isfinite(p0).all() and np.isfinite(p1).all() and np.isfinite(p2).all()):
         raise ValueError("triangle corners must be finite")
     if n == 0:
-        empty = np.zeros((0, 3))
+        empty = np.zeros((0, 3), np.float32)
         none = np.zeros(0, np.int64)
         return BVHArrays(empty, empty, none, none, none, none, none, 0,
                          time.perf_counter() - t_start)
@@ -178,6 +178,12 @@ def _half_area_jit(lo, hi):
 def _component(v, axis):
     """Component ``axis`` (per lane: 0, 1 or 2) of an Array3f."""
     return dr.select(axis == 0, v.x, dr.select(axis == 1, v.y, v.z))
+
+
+def _bin_scale(c_lo, c_hi, nb):
+    """Per axis, nb / (the centroid box's extent): bins per unit length; 0 on a flat axis."""
+    ext = c_hi - c_lo
+    return jit.Array3f(*(dr.select(ext[k] > 0, jit.Float(nb) / ext[k], 0.0) for k in range(3)))
 
 
 def _bin(c, c_lo, scale, nb):
@@ -281,8 +287,7 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
             best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _large_nodes(
                 lo, hi, h_first, h_cnt, h_big, nbmax, bins,
                 (best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi))
-        ext = c_hi - c_lo
-        scale = A3(*(dr.select(ext[k] > 0, F(nb) / ext[k], 0.0) for k in range(3)))
+        scale = _bin_scale(c_lo, c_hi, nb)
 
         # Leaves: at most max_leaf triangles and no split expected to be cheaper.
         area = _half_area_jit(box_lo, box_hi)
@@ -383,8 +388,7 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, small):
     dr.eval(k_lo, k_hi, k_clo, k_chi)
     b_lo, b_hi, c_lo, c_hi = _chunk_boxes(k_lo, k_hi, n_first, n_nc, centroids=(k_clo, k_chi))
     nb = U(bins)
-    ext = c_hi - c_lo
-    scale = A3(*(dr.select(ext[k] > 0, F(nb) / ext[k], 0.0) for k in range(3)))
+    scale = _bin_scale(c_lo, c_hi, nb)
     dr.eval(b_lo, b_hi, c_lo, c_hi, scale)
     # Chunks' bins (3 axes x nbmax, in that order per chunk), then each node's.
     node = U(ch_node.astype(np.uint32))
@@ -517,8 +521,7 @@ def _small_nodes(lo, hi, first, cnt, nb, active, nbmax):
     F, U, A3 = jit.Float, jit.UInt32, jit.Array3f
     S = dr.width(first)
     b_lo, b_hi, c_lo, c_hi = _chunk_boxes(lo, hi, first, dr.select(active, cnt, 0))
-    ext = c_hi - c_lo
-    scale = A3(*(dr.select(ext[k] > 0, F(nb) / ext[k], 0.0) for k in range(3)))
+    scale = _bin_scale(c_lo, c_hi, nb)
     n_bin, lo_bin, hi_bin = _bin_triangles(lo, hi, first, cnt, 1, c_lo, scale, nb, nbmax, active)
     best, best_axis, best_bin = dr.full(F, dr.inf, S), dr.zeros(U, S), dr.zeros(U, S)
     right = dr.alloc_local(F, nbmax, F(0))
