@@ -90,6 +90,7 @@ def main(argv=None) -> int:
     from reference import mitsuba
     from reference.mitsuba_scene import load
     from tracer import backend, load_scene
+    from tracer.bvh import sah_cost
     from tracer.integrator import Integrator
 
     name = backend.use(args.backend)
@@ -108,6 +109,7 @@ def main(argv=None) -> int:
         load_s = time.perf_counter() - t0
         integ = Integrator(scene)
         bvh = next(b for b in integ.geo.blocks if hasattr(b, "bvh")).bvh
+        a = bvh.arrays
         mi = mitsuba()
         t0 = time.perf_counter()
         ms = load(scene, mi, "direct")
@@ -131,8 +133,9 @@ def main(argv=None) -> int:
         t_tracer = timed(integ.render)
         t_mitsuba = timed(run_mitsuba)
     print(f"mesh: {len(f):,} triangles; scene {w}x{h}, {spp} spp, backend {name}")
-    print(f"  BVH build (Dr.Jit)         {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes)"
-          f"; scene load incl. PLY {load_s:.3f} s; Mitsuba scene load {mi_load_s:.3f} s")
+    print(f"  BVH build (Dr.Jit)         {bvh.build_seconds:8.3f} s  ({bvh.node_count:,} nodes, "
+          f"SAH cost {sah_cost(a.lo, a.hi, a.count, a.left >= 0):.1f}); scene load incl. PLY "
+          f"{load_s:.3f} s; Mitsuba scene load {mi_load_s:.3f} s")
     for suffix, (cold, warm, size) in parse.items():
         print(f"  mesh file {suffix} ({size / 1e6:.1f} MB)   parsed {cold:8.4f} s, loaded again "
               f"(cached) {warm * 1e6:.0f} us (medians of {args.repeat})")

@@ -14,7 +14,7 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from tracer.bvh import BVH, INVALID, build_bvh
+from tracer.bvh import BVH, INVALID, build_bvh, sah_cost
 from tracer.shapes import triangle as tri_f
 
 #: Relative tolerance on t: a few float32 roundings (2^-24 each) that may differ
@@ -180,13 +180,6 @@ def test_boxes_are_the_smallest_float32_boxes_around_the_corners():
     np.testing.assert_array_equal(b.lo[leaf], lo32)
     np.testing.assert_array_equal(b.hi[leaf], hi32)
     assert (b.lo[leaf] <= lo).all() and (b.hi[leaf] >= hi).all()
-
-
-def sah_cost(lo, hi, count, inner, c_trav=2.0, c_isect=1.0):
-    """The SAH's expected cost of a tree, relative to its root's area (module tracer.bvh)."""
-    d = np.maximum(np.asarray(hi, float) - lo, 0)
-    area = d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0]
-    return (c_trav * area[inner].sum() + c_isect * (area[~inner] * count[~inner]).sum()) / area[0]
 
 
 def median_tree_cost(p0, p1, p2, max_leaf=4):

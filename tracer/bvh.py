@@ -67,7 +67,8 @@ from tracer import backend
 from tracer.backend import jit
 from tracer.shapes import triangle as tri_f
 
-__all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes"]
+__all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
+           "sah_cost"]
 
 #: Triangle index reported for a ray that hits nothing.
 INVALID = 0xFFFFFFFF
@@ -156,6 +157,20 @@ def build_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *, bins: int = 16,
                                   float(intersection_cost))
     arrays = _depth_first(levels, order)
     return BVHArrays(*arrays, depth=len(levels) - 1, seconds=time.perf_counter() - t_start)
+
+
+def sah_cost(lo, hi, count, inner, traversal_cost: float = 2.0,
+             intersection_cost: float = 1.0) -> float:
+    """A tree's expected cost by the SAH the builder minimises (module docstring),
+    relative to its root's area: C_trav times the inner nodes' areas plus C_isect
+    times each leaf's area and triangle count. A measure of a tree's quality that
+    does not depend on timing (``benchmarks/bench_mesh.py`` prints it)."""
+    d = np.maximum(np.asarray(hi, np.float64) - lo, 0)
+    area = d[:, 0] * d[:, 1] + d[:, 1] * d[:, 2] + d[:, 2] * d[:, 0]
+    inner = np.asarray(inner, bool)
+    return float((traversal_cost * area[inner].sum()
+                  + intersection_cost * (area[~inner] * np.asarray(count)[~inner]).sum())
+                 / area[0])
 
 
 def build_box_bvh(lo: np.ndarray, hi: np.ndarray, **options) -> BVHArrays:
