@@ -110,7 +110,7 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
         hit = geo.closest_hit(O, D, T)
         surf = geo.surface(hit, O, D)
         valid = hit.valid
-        # The hit as the integrator shades it (Integrator._level).
+        # The hit as the integrator shades it (Integrator._shade).
         cos_o = -dr.dot(surf.n, D)
         cos_sh = -dr.dot(surf.ns, D)
         ng = dr.select(cos_o >= 0, surf.n, -surf.n)

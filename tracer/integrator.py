@@ -82,6 +82,10 @@ SHADOW_EPSILON = 1e-3
 SIGNIFICANT_WEIGHT = 1e-3
 
 
+#: How the recursion is scheduled (:class:`Integrator`'s ``schedule``).
+SCHEDULES = ("auto", "wavefront", "stack")
+
+
 @dataclass
 class RenderResult:
     """An image (H x W x 3, float32, linear radiance) and what it cost."""
@@ -232,7 +236,8 @@ class Integrator:
     """Renders one validated scene; construct once, render any number of times."""
 
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
-                 lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0):
+                 lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0,
+                 schedule: str = "auto"):
         backend.use()
         from tracer.limits import check_render
 
@@ -274,6 +279,15 @@ class Integrator:
             chunk_samples = ((1 << 24) if backend.name() == "cuda"
                              else cpu_chunk(scene.film.max_depth))
         self.chunk_samples = chunk_samples
+        if schedule not in SCHEDULES:
+            raise ValueError(f"schedule must be one of {', '.join(SCHEDULES)}, not {schedule!r}")
+        if schedule == "auto":
+            schedule = "stack" if self.materials.has_delta and scene.film.max_depth > 2 \
+                else "wavefront"
+        #: "wavefront" (a kernel a level, :meth:`_level`) or "stack" (a kernel a chunk,
+        #: :meth:`_render_stack`)
+        self.schedule = schedule
+        self.per_sample = schedule == "stack"
 
     # ------------------------------------------------------------------ one level
 
@@ -284,9 +298,47 @@ class Integrator:
         that no level waits for it) holds the shadow rays cast in its high 32 bits
         and the rays whose weight is significant in its low 32 bits.
         """
+        contrib, shadow_masks, children = self._shade(b, depth)
+        L.add(contrib, b.slot)
+        # The level's statistics as one count per lane, summed without waiting for them:
+        # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
+        # Camera rays all have weight 1, so all matter: their lanes count only shadow
+        # rays, in 32 bits where the sum fits (half the memory of the 64-bit tally; on
+        # three_lights, 800x480, 64 spp, the tally was about 6 % of the render).
+        n = b.size()
+        narrow = b.tmax is not None and len(shadow_masks) * n < (1 << 32)  # the camera's
+        if narrow:
+            tally = dr.zeros(jit.UInt32, n)
+            for m in shadow_masks:
+                tally += dr.select(m, jit.UInt32(1), jit.UInt32(0))
+        else:
+            tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1),
+                              jit.UInt64(0))
+            for m in shadow_masks:
+                tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
+        # One kernel: intersection, shading, shadow rays and the next level's rays.
+        dr.eval(*L.outputs(), tally, *(x for c, keep in children or ()
+                                       for x in (c.o, c.d, c.weight, keep, c.state)
+                                       if x is not None))
+        L.commit()
+        total = dr.sum(tally)
+        if narrow:  # shadow rays in the high bits; all n rays matter
+            total = (jit.UInt64(total) << 32) | n
+        return (None if children is None else _compact(children)), total
+
+    def _shade(self, b: _Batch, depth, active=True) -> tuple[object, list, list | None]:
+        """The light a batch of rays finds, and the rays it spawns: (contrib, shadow masks,
+        children), children being (batch, keep) pairs or None.
+
+        ``depth`` is the batch's level, an int (the wavefront: every ray at one level), or
+        a jit.UInt32 per ray (:meth:`_render_stack`: rays at many levels in one kernel),
+        where what an int decides for the whole batch becomes a mask per ray. Rays
+        outside ``active`` are not traced.
+        """
         scene, geo = self.scene, self.geo
         max_depth = scene.film.max_depth
-        hit: Hit = geo.closest_hit(b.o, b.d, dr.inf if b.tmax is None else b.tmax)
+        per_ray = not isinstance(depth, int)
+        hit: Hit = geo.closest_hit(b.o, b.d, dr.inf if b.tmax is None else b.tmax, active)
         valid = hit.valid
         surf = geo.surface(hit, b.o, b.d)
         p, n, n_sh = surf.p, surf.n, surf.ns
@@ -303,13 +355,17 @@ class Integrator:
             if self.dfa is not None:
                 missed &= self._accepts(self._step(b.state, "L"))
             for light in self.backgrounds:
-                if light.hit_term and depth >= max_depth:
-                    continue  # a hit term, counted only where rays are still shaded
-                contrib += dr.select(missed, b.weight * light.background(b.d), 0)
+                gate = missed
+                if light.hit_term:  # a hit term, counted only where rays are still shaded
+                    if per_ray:
+                        gate = missed & (depth < max_depth)
+                    elif depth >= max_depth:
+                        continue
+                contrib += dr.select(gate, b.weight * light.background(b.d), 0)
 
         children = None
         shadow_masks = []
-        if depth < max_depth:
+        if per_ray or depth < max_depth:
             # The shading of the rays that hit something. At the camera level of a scene
             # without mirrors or glass it runs as a symbolic if, which a SIMD packet of
             # rays that all missed (sky) skips: three_lights, where 29 % of the camera
@@ -350,7 +406,7 @@ class Integrator:
                         u = None
                         if not light.delta:
                             u = light_sample(*b.pixel_and_sample(), scene.film.strata, self.seed,
-                                             depth, light.index)
+                                             depth, light.index, max_depth)
                         wi, dist, e = light.sample(p, p_front, u)
                         cos = lights.lambert_cosine(nl, wi)
                         f = mats.eval(wi)
@@ -368,47 +424,114 @@ class Integrator:
                         blocked = geo.occluded(origin, d_shadow, tmax, active)
                         add += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
                         masks.append(active)
-                if self.materials.has_delta and (depth + 1 < max_depth or self.last_level_sees):
-                    kids = self._delta(b, mats, si, off)
+                if self.materials.has_delta:
+                    if per_ray:  # the rays of the last segment only where they can add light
+                        kids = self._delta(b, mats, si, off)
+                        if not self.last_level_sees:
+                            kids = [(c, keep & (depth + 1 < max_depth)) for c, keep in kids]
+                    elif depth + 1 < max_depth or self.last_level_sees:
+                        kids = self._delta(b, mats, si, off)
                 return add, tuple(masks), kids
 
-            if b.tmax is not None and not self.materials.has_delta:  # no child rays here
+            if not per_ray and b.tmax is not None and not self.materials.has_delta:
                 n_lights = len(self.illuminating) if self.materials.has_smooth else 0
                 add, masks = dr.if_stmt(
                     (valid,), valid, lambda v: shade(v)[:2],
                     lambda v: (dr.zeros(jit.Array3f, b.size()),
                                tuple(dr.zeros(jit.Bool, b.size()) for _ in range(n_lights))))
             else:
-                add, masks, children = shade(valid)
+                add, masks, children = shade(valid & (depth < max_depth) if per_ray else valid)
             contrib += add
             shadow_masks = list(masks)
+        return contrib, shadow_masks, children
 
-        L.add(contrib, b.slot)
-        # The level's statistics as one count per lane, summed without waiting for them:
-        # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
-        # Camera rays all have weight 1, so all matter: their lanes count only shadow
-        # rays, in 32 bits where the sum fits (half the memory of the 64-bit tally; on
-        # three_lights, 800x480, 64 spp, the tally was about 6 % of the render).
+    def _render_stack(self, b: _Batch) -> tuple[object, object]:
+        """A chunk's radiance per sample and its counts, every level in one kernel.
+
+        Each lane follows its sample's ray tree depth first: a loop traces and shades
+        one ray a pass (:meth:`_shade`, the wavefront's shading), goes on with the first
+        child ray it keeps and pushes the others onto a stack of its own in local memory
+        (:func:`drjit.alloc_local`), and pops one when a ray keeps none. The tree of
+        a sample is the wavefront's, ray for ray; only the order in which its light is
+        summed differs. There is no compaction, no atomic add of a level's light and
+        no kernel a level: on Heckbert's scene at DEPTH 25 (256x256, 16 spp), the
+        wavefront ran 684 kernels a render.
+
+        A lane keeps at most ``slots - 1`` rays pending per level below it, so the stack
+        holds (slots - 1) max_depth rays. The counts (rays, significant rays and
+        shadow rays of each level) are summed per lane in local memory, added per
+        SIMD packet with one scatter each after the loop, and summed per level by
+        the caller: a jit.UInt32 of 3 max_depth values, (rays, significant, shadow)
+        of level 1, then of level 2, ...
+        """
+        max_depth = self.scene.film.max_depth
         n = b.size()
-        narrow = b.tmax is not None and len(shadow_masks) * n < (1 << 32)  # the camera's
-        if narrow:
-            tally = dr.zeros(jit.UInt32, n)
-            for m in shadow_masks:
-                tally += dr.select(m, jit.UInt32(1), jit.UInt32(0))
-        else:
-            tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1),
-                              jit.UInt64(0))
-            for m in shadow_masks:
-                tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
-        # One kernel: intersection, shading, shadow rays and the next level's rays.
-        dr.eval(*L.outputs(), tally, *(x for c, keep in children or ()
-                                       for x in (c.o, c.d, c.weight, keep, c.state)
-                                       if x is not None))
-        L.commit()
-        total = dr.sum(tally)
-        if narrow:  # shadow rays in the high bits; all n rays matter
-            total = (jit.UInt64(total) << 32) | n
-        return (None if children is None else _compact(children)), total
+        cap = max(1, (self.materials.delta_slots - 1) * max_depth)
+        dfa = self.dfa is not None
+        NF = 9  # o, d, weight
+        pend_f = dr.alloc_local(jit.Float, NF * cap, jit.Float(0))
+        pend_u = dr.alloc_local(jit.UInt32, 2 * cap, jit.UInt32(0))  # level, DFA state
+        counts = dr.alloc_local(jit.UInt32, 3 * max_depth, jit.UInt32(0))
+        state0 = b.state if dfa else dr.zeros(jit.UInt32, n)
+        loop_state = (dr.full(jit.Bool, True, n), dr.zeros(jit.UInt32, n),
+                      dr.full(jit.UInt32, 1, n), jit.Float(b.tmax), jit.Array3f(b.o),
+                      jit.Array3f(b.d), jit.Array3f(b.weight), jit.UInt32(state0),
+                      dr.zeros(jit.Array3f, n), pend_f, pend_u, counts)
+        one, zero = jit.UInt32(1), jit.UInt32(0)
+
+        def body(alive, sp, depth, tmax, o, d, w, st, L, pend_f, pend_u, counts):
+            cur = b.like([o, d, w, b.slot, st if dfa else None])
+            cur.tmax = tmax
+            contrib, masks, kids = self._shade(cur, depth, alive)
+            L = L + dr.select(alive, contrib, 0)
+            base = (depth - 1) * 3
+            sig = dr.select(dr.max(w) > SIGNIFICANT_WEIGHT, one, zero)
+            shadows = zero
+            for m in masks:
+                shadows = shadows + dr.select(m, one, zero)
+            for k, v in enumerate((one, sig, shadows)):
+                counts.write(counts.read(base + k, alive) + v, base + k, alive)
+            # The first child kept goes on; the others wait on the stack.
+            have = dr.zeros(jit.Bool, n)
+            for c, keep in kids or ():
+                keep = alive & keep
+                push = keep & have
+                for j, x in enumerate((*c.o, *c.d, *c.weight)):
+                    pend_f.write(x, sp * NF + j, push)
+                pend_u.write(depth + 1, sp * 2, push)
+                if dfa:
+                    pend_u.write(c.state, sp * 2 + 1, push)
+                sp = dr.select(push, sp + 1, sp)
+                take = keep & ~have
+                o, d, w = (dr.select(take, x, y) for x, y in ((c.o, o), (c.d, d), (c.weight, w)))
+                if dfa:
+                    st = dr.select(take, c.state, st)
+                have = have | keep
+            depth = dr.select(have, depth + 1, depth)
+            # None kept: the ray pushed last, or the end of this sample's tree.
+            pop = alive & ~have & (sp > 0)
+            sp = dr.select(pop, sp - 1, sp)
+            f = [pend_f.read(sp * NF + j, pop) for j in range(NF)]
+            o = dr.select(pop, jit.Array3f(*f[0:3]), o)
+            d = dr.select(pop, jit.Array3f(*f[3:6]), d)
+            w = dr.select(pop, jit.Array3f(*f[6:9]), w)
+            depth = dr.select(pop, pend_u.read(sp * 2, pop), depth)
+            if dfa:
+                st = dr.select(pop, pend_u.read(sp * 2 + 1, pop), st)
+            tmax = dr.select(have | pop, dr.inf, tmax)
+            return (have | pop, sp, depth, tmax, o, d, w, st, L, pend_f, pend_u, counts)
+
+        out = dr.while_loop(loop_state, lambda alive, *_: alive, body)
+        L, counts = out[8], out[11]
+        # Per-packet sums of the lanes' counts, level-major, then one sum a count.
+        packets = (n + 15) // 16
+        total = dr.zeros(jit.UInt32, 3 * max_depth * packets)
+        packet = b.slot >> 4
+        for j in range(3 * max_depth):
+            dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * packets + packet,
+                              mode=dr.ReduceMode.Local)
+        dr.eval(L, total)
+        return L, dr.block_sum(jit.UInt64(total), packets)
 
     def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
         """The next level's rays: one batch per delta-lobe slot, and which of them to keep."""
@@ -462,6 +585,7 @@ class Integrator:
         shadow = [0] * max_depth
         significant = [0] * max_depth
         tallies: list[list] = [[] for _ in range(max_depth)]  # _level's sums, read at the end
+        counts: list = []  # _render_stack's sums, read at the end
         start = time.perf_counter()
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
@@ -476,15 +600,20 @@ class Integrator:
             state = None
             if self.dfa is not None:  # every path ends at the eye: read E first
                 state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), count * spp)
-            stack = [(1, _Batch(o, d, ones, slot, state, first, spp, tmax))]
-            while stack:
-                depth, batch = stack.pop()
-                rays[depth - 1] += batch.size()
-                nxt, tally = self._level(batch, depth, radiance)
-                tallies[depth - 1].append(tally)
-                if nxt is not None and depth < max_depth:
-                    for part in reversed(nxt.split(self.chunk_samples)):
-                        stack.append((depth + 1, part))
+            camera = _Batch(o, d, ones, slot, state, first, spp, tmax)
+            if self.per_sample:
+                radiance.value, sums = self._render_stack(camera)
+                counts.append(sums)
+            else:
+                stack = [(1, camera)]
+                while stack:
+                    depth, batch = stack.pop()
+                    rays[depth - 1] += batch.size()
+                    nxt, tally = self._level(batch, depth, radiance)
+                    tallies[depth - 1].append(tally)
+                    if nxt is not None and depth < max_depth:
+                        for part in reversed(nxt.split(self.chunk_samples)):
+                            stack.append((depth + 1, part))
             if splat is not None:
                 splat.add(radiance.value.numpy().T, fx.numpy(), fy.numpy())
             else:
@@ -502,6 +631,11 @@ class Integrator:
             del radiance
             if progress is not None:
                 progress(first + count, total)
+        if counts:  # per level: rays, significant rays, shadow rays (_render_stack)
+            per_level = np.sum([x.numpy() for x in counts], axis=0).reshape(max_depth, 3)
+            rays = [int(x) for x in per_level[:, 0]]
+            significant = [int(x) for x in per_level[:, 1]]
+            shadow = [int(x) for x in per_level[:, 2]]
         for k, sums in enumerate(tallies):
             for v in (int(x) for x in dr.concat(sums).numpy()) if sums else ():
                 shadow[k] += v >> 32

@@ -125,15 +125,21 @@ def jitter_2d(pixel, s, seed: int):
     return jit.Array2f(uniform(h1), uniform(h2))
 
 
-def light_sample(pixel, s, n: int, seed: int, depth: int, light: int):
+def light_sample(pixel, s, n: int, seed: int, depth, light: int, max_depth: int | None = None):
     """The 2D sample of area light ``light`` for sample ``s`` of ``pixel`` at level ``depth``.
 
     One dimension of :func:`stratified_2d` per (seed, recursion level, light):
     every level and every light draws independent, stratified points, and a
     render with another ``seed`` draws another set. Levels count from 1 (camera
     rays); lights are numbered in scene order among the emitting shapes.
+    ``depth`` is an int, or a jit.UInt32 of levels (at most ``max_depth``, then
+    required) where the rays of one kernel sit at different levels.
     """
     # A hash, not bit fields, so that any 32-bit seed works (seed32 maps other integers);
     # opaque, so that every level and light reuses one compiled kernel.
-    dimension = dr.opaque(jit.UInt32, mix32(seed32(seed), depth, light))
+    if isinstance(depth, int):
+        dimension = dr.opaque(jit.UInt32, mix32(seed32(seed), depth, light))
+    else:  # the same keys, looked up per lane
+        table = jit.UInt32([mix32(seed32(seed), k, light) for k in range(max_depth + 1)])
+        dimension = dr.gather(jit.UInt32, table, depth)
     return stratified_2d(pixel, s, n, dimension)

@@ -159,6 +159,9 @@ class SceneMaterials:
             self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
         self.one_sided = jit.Bool(np.asarray(one_sided + [False], dtype=bool))
         self.has_delta = any(k.lobes for k in self.kinds) or self.has_mask
+        #: the most delta-lobe slots :meth:`Closure.delta_lobes` returns (one per lobe of the
+        #: kind with the most, and the mask's ray straight through)
+        self.delta_slots = max((len(k.lobes) for k in self.kinds), default=0) + self.has_mask
 
     def at(self, mid, si: ShadingPoint, valid) -> Closure:
         """The materials of material ids ``mid`` at the hits ``si`` (lanes in ``valid``)."""
