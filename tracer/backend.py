@@ -157,3 +157,48 @@ def syntax(fn):
         return done(*args, **kwargs)
 
     return wrapper
+
+
+#: Byte boundary :func:`upload` puts an array's first element on.
+ALIGNMENT = 64
+
+
+def upload(array_type, values, dtype):
+    """``array_type`` (e.g. ``jit.Float``) holding ``values`` as ``dtype``, its first element
+    on a 64-byte boundary.
+
+    On the CPU, Dr.Jit uses the memory of a contiguous numpy array it is given
+    instead of copying it, and writes into each kernel whether that memory is
+    aligned (an array of one float at an address that is not a multiple of 64
+    is loaded with ``align 1``, else ``align 4``). numpy places small arrays on
+    16- or 32-byte boundaries as it happens, so the same scene built twice gave
+    kernels that differed in that one word: another hash, so no hit in Dr.Jit's
+    kernel cache, and LLVM compiled the kernel again (about 0.1 s for the
+    one-kernel recursion of :class:`tracer.integrator.Integrator`, at every
+    render of the formula-bug sweep). Placed on a 64-byte boundary, the
+    arrays give the same kernel every time, and a 16-float record fills one
+    cache line (the BVH's node records). Elsewhere (CUDA) Dr.Jit copies the
+    data into its own memory, aligned too.
+    """
+    import numpy as np
+
+    a = np.asarray(values, dtype=dtype).reshape(-1)
+    if a.flags.c_contiguous and a.ctypes.data % ALIGNMENT == 0:
+        return array_type(a)
+    pad = ALIGNMENT // a.itemsize
+    buf = np.empty(a.size + pad, dtype=a.dtype)
+    start = (-buf.ctypes.data % ALIGNMENT) // a.itemsize
+    view = buf[start:start + a.size]
+    view[...] = a
+    return array_type(view)
+
+
+def upload_rows(array_type, rows, dtype="float32"):
+    """A vector array type (``jit.Array3f``, ``jit.Array2f``) of (N, k) rows, one
+    :func:`upload` per component."""
+    import numpy as np
+
+    width = len(array_type())
+    a = np.asarray(rows, dtype=dtype).reshape(-1, width)
+    scalar = type(array_type()[0])
+    return array_type(*(upload(scalar, a[:, k], dtype) for k in range(width)))

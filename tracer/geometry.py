@@ -34,7 +34,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import backend, faults
-from tracer.backend import jit
+from tracer.backend import jit, upload, upload_rows
 from tracer.scene import (
     Cylinder,
     Disk,
@@ -65,16 +65,15 @@ INSTANCE_SET_MIN = 8
 
 
 def _v3(rows) -> object:
-    a = np.asarray(rows, dtype=np.float32).reshape(-1, 3)
-    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+    return upload_rows(jit.Array3f, rows)
 
 
 def _f(values) -> object:
-    return jit.Float(np.asarray(values, dtype=np.float32))
+    return upload(jit.Float, values, np.float32)
 
 
 def _u(values) -> object:
-    return jit.UInt32(np.asarray(values, dtype=np.uint32))
+    return upload(jit.UInt32, values, np.uint32)
 
 
 def _c3(v) -> object:
@@ -369,8 +368,7 @@ class _MeshBlock(_Block):
         self.vn = None if mesh.normals is None else _v3(mesh.normals)
         self.vt = None
         if mesh.uvs is not None:
-            uvs = np.asarray(mesh.uvs, dtype=np.float32)
-            self.vt = jit.Array2f(uvs[:, 0], uvs[:, 1])
+            self.vt = upload_rows(jit.Array2f, mesh.uvs)
 
     def intersect(self, o, d, t, prim, active):
         ti, tri, _, _ = self.bvh.closest_hit(o, d, t, active)
@@ -495,8 +493,7 @@ class _InstanceSetBlock(_Block):
         arrays = build_box_bvh(w.min(axis=1), w.max(axis=1), max_leaf=1)
         self.depth = arrays.depth
         rec, self._root, self._stack = pack_nodes(arrays)
-        self.nodes = jit.Float(np.ascontiguousarray(
-            rec if len(rec) else np.zeros((1, 16), np.float32)).reshape(-1))
+        self.nodes = upload(jit.Float, rec if len(rec) else np.zeros((1, 16)), np.float32)
         self.order = _u(arrays.order)
 
     @staticmethod

@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from tracer import faults
-from tracer.backend import deferred, jit
+from tracer.backend import deferred, jit, upload, upload_rows
 from tracer.emitters import base
 
 if TYPE_CHECKING:
@@ -194,8 +194,8 @@ class _Triangles(_Flat):
         cdf = np.cumsum(areas) / self.area
         cdf[-1] = 1.0
         self.count = len(areas)
-        self.cdf = jit.Float(cdf.astype(np.float32))
-        self.lo = jit.Float(np.concatenate([[0.0], cdf[:-1]]).astype(np.float32))
+        self.cdf = upload(jit.Float, cdf, np.float32)
+        self.lo = upload(jit.Float, np.concatenate([[0.0], cdf[:-1]]), np.float32)
         self.p0 = _table(p0)
         self.e1 = _table(p1 - p0)
         self.e2 = _table(p2 - p0)
@@ -275,8 +275,7 @@ class _CylinderSide:
 
 
 def _table(a: np.ndarray):
-    a = np.asarray(a, dtype=np.float32)
-    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+    return upload_rows(jit.Array3f, a)
 
 
 #: Shape ``type`` -> how an emitter on it is sampled (one line per emitting shape kind).

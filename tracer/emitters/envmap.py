@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracer.backend import deferred, jit
+from tracer.backend import deferred, jit, upload_rows
 from tracer.emitters import base
 
 if TYPE_CHECKING:
@@ -77,8 +77,7 @@ class Emitter(base.Emitter):
         h, w = light.texels.shape[:2]
         # The periodic column: column W repeats column 0 (as Mitsuba pads its map).
         padded = np.concatenate([light.texels, light.texels[:, :1]], axis=1)
-        a = (padded.reshape(-1, 3) * np.float32(light.scale)).astype(np.float32)
-        self.texels = jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+        self.texels = upload_rows(jit.Array3f, padded.reshape(-1, 3) * np.float32(light.scale))
         self.width, self.height = w, h
         inv = np.linalg.inv(np.asarray(light.to_world)[:3, :3])
         self.rows = [base.vec(inv[k]) for k in range(3)]

@@ -45,7 +45,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from tracer.backend import deferred, jit
+from tracer.backend import deferred, jit, upload, upload_rows
 
 dr = deferred("drjit")
 
@@ -212,18 +212,17 @@ def parse_two_sided(t) -> bool:
 
 def colors(values) -> Any:
     """A table of RGB colours, one row per material."""
-    a = np.asarray(values, dtype=np.float32).reshape(-1, 3)
-    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+    return upload_rows(jit.Array3f, values)
 
 
 def floats(values) -> Any:
     """A table of numbers, one row per material."""
-    return jit.Float(np.asarray(values, dtype=np.float32))
+    return upload(jit.Float, values, np.float32)
 
 
 def flags(values) -> Any:
     """A table of booleans, one row per material."""
-    return jit.Bool(np.asarray(values, dtype=bool))
+    return upload(jit.Bool, values, bool)
 
 
 def gather(table, row, active):

@@ -24,7 +24,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import faults
-from tracer.backend import jit
+from tracer.backend import jit, upload
 from tracer.materials import REGISTRY, type_of
 from tracer.materials.base import MaterialModel, ShadingPoint
 from tracer.materials.textures import TextureTable
@@ -138,8 +138,8 @@ class SceneMaterials:
         self.kinds = [REGISTRY[name].BSDF(by_kind[name]) for name in order]
         # Material id len(materials) is "no material" (a pure emitter): no kind matches it.
         kind = [order.index(name) for name, _ in rows] + [len(order)]
-        self.kind = jit.UInt32(np.asarray(kind, dtype=np.uint32))
-        self.row = jit.UInt32(np.asarray([r for _, r in rows] + [0], dtype=np.uint32))
+        self.kind = upload(jit.UInt32, kind, np.uint32)
+        self.row = upload(jit.UInt32, [r for _, r in rows] + [0], np.uint32)
         self.has_smooth = any(k.smooth for k in self.kinds)
         # Materials with ``two_sided = false`` are black where the ray arrives from behind
         # (the side the shading normal points away from), as a bare Mitsuba BSDF is.
@@ -156,8 +156,8 @@ class SceneMaterials:
             self.opacity = TextureTable([o if not isinstance(o, (int, float)) else (o,) * 3
                                          for o in opacity] + [(1.0, 1.0, 1.0)])
         else:
-            self.opacity = jit.Float(np.asarray(opacity + [1.0], dtype=np.float32))
-        self.one_sided = jit.Bool(np.asarray(one_sided + [False], dtype=bool))
+            self.opacity = upload(jit.Float, opacity + [1.0], np.float32)
+        self.one_sided = upload(jit.Bool, one_sided + [False], bool)
         self.has_delta = any(k.lobes for k in self.kinds) or self.has_mask
         #: the most delta-lobe slots :meth:`Closure.delta_lobes` returns (one per lobe of the
         #: kind with the most, and the mask's ray straight through)

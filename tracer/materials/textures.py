@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tracer.backend import deferred, jit
+from tracer.backend import deferred, jit, upload, upload_rows
 from tracer.materials.base import gather
 
 if TYPE_CHECKING:
@@ -189,8 +189,7 @@ class TextureTable:
                 for t in textures]
 
         def col(values):
-            a = np.asarray(values, dtype=np.float32).reshape(-1, 3)
-            return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+            return upload_rows(jit.Array3f, values)
 
         self.color = col([c for c, _ in rows])
         bitmaps = [b if isinstance(b, Bitmap) else None for _, b in rows]
@@ -205,25 +204,23 @@ class TextureTable:
                 data.append(np.zeros((1, 3), np.float32) if b is None else
                             b.texels.reshape(-1, 3))
                 offset += w * h
-            self.is_bitmap = jit.Bool(np.asarray([b is not None for b in bitmaps]))
+            self.is_bitmap = upload(jit.Bool, [b is not None for b in bitmaps], bool)
             self.texels = col(np.concatenate(data))
-            self.offset = jit.UInt32(np.asarray(offsets, dtype=np.uint32))
-            sz = np.asarray(sizes, dtype=np.float32)
-            self.size = jit.Array2f(sz[:, 0], sz[:, 1])
-            self.bilinear = jit.Bool(np.asarray([b is not None and b.filter_type == "bilinear"
-                                                 for b in bitmaps]))
-            self.wrap = jit.UInt32(np.asarray([0 if b is None else WRAP_MODES.index(b.wrap_mode)
-                                               for b in bitmaps], dtype=np.uint32))
+            self.offset = upload(jit.UInt32, offsets, np.uint32)
+            self.size = upload_rows(jit.Array2f, sizes)
+            self.bilinear = upload(jit.Bool, [b is not None and b.filter_type == "bilinear"
+                                              for b in bitmaps], bool)
+            self.wrap = upload(jit.UInt32, [0 if b is None else WRAP_MODES.index(b.wrap_mode)
+                                            for b in bitmaps], np.uint32)
         boards = [b for _, b in rows]
         self.has_checker = any(b is not None for b in boards)
         if self.has_checker:
             blank = Checkerboard((0, 0, 0), (0, 0, 0), (1, 1))
             boards_or_blank = [b or blank for b in boards]
-            self.checker = jit.Bool(np.asarray([b is not None for b in boards]))
+            self.checker = upload(jit.Bool, [b is not None for b in boards], bool)
             self.c0 = col([b.color0 for b in boards_or_blank])
             self.c1 = col([b.color1 for b in boards_or_blank])
-            sc = np.asarray([b.scale for b in boards_or_blank], dtype=np.float32)
-            self.scale = jit.Array2f(sc[:, 0], sc[:, 1])
+            self.scale = upload_rows(jit.Array2f, [b.scale for b in boards_or_blank])
 
     def eval(self, row, uv, active) -> Any:
         """The texture's colour at ``uv`` for each lane's material ``row`` (Array3f)."""
