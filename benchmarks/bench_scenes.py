@@ -8,6 +8,7 @@ compares the tracer with itself, before and after a change to it (run it in
 both checkouts), where `bench_speed.py` compares it with Mitsuba and minray.
 
     python benchmarks/bench_scenes.py [SCENE ...] [--size 320x240] [--spp 64] [--repeat 3]
+                                      [--schedule auto|wavefront|stack]
 """
 
 from __future__ import annotations
@@ -35,6 +36,8 @@ def main(argv=None) -> int:
     p.add_argument("--spp", type=_positive, default=64)
     p.add_argument("--repeat", type=_positive, default=3)
     p.add_argument("--backend", default=None)
+    p.add_argument("--schedule", choices=("auto", "wavefront", "stack"), default="auto",
+                   help="the recursion schedule (tracer.integrator.SCHEDULES)")
     args = p.parse_args(argv)
 
     from tracer import backend, load_scene
@@ -47,7 +50,7 @@ def main(argv=None) -> int:
     for scene_name in args.scenes:
         scene = load_scene(resolve_scene(scene_name)).with_overrides(size=args.size,
                                                                     spp=args.spp)
-        integ = Integrator(scene)
+        integ = Integrator(scene, schedule=args.schedule)
         t0 = time.perf_counter()
         integ.render()
         first = time.perf_counter() - t0
@@ -57,7 +60,8 @@ def main(argv=None) -> int:
             result = integ.render()
             times.append(time.perf_counter() - t0)
         print(f"  {scene_name:<20} first {first:7.3f} s   warm {statistics.median(times):7.3f} s"
-              f"   {result.rays_total:,} rays, {len(result.rays_per_level)} levels")
+              f"   {result.rays_total:,} rays, {len(result.rays_per_level)} levels, "
+              f"{integ.schedule}")
     return 0
 
 

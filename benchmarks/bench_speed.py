@@ -9,6 +9,7 @@ process whose kernels are cached, the everyday case.
     python benchmarks/bench_speed.py direct     [--size 800x480] [--spp 64] [--repeat 3]
     python benchmarks/bench_speed.py mesh       [--triangles 1000000] [--repeat 3]
     python benchmarks/bench_speed.py recursion  [--size 256] [--spp 16] [--depth 25] [--repeat 3]
+                                                [--schedule auto|wavefront|stack]
     python benchmarks/bench_speed.py quality    [--size 200x150] [--rel-rmse 0.02] [SCENE ...]
     python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
     python benchmarks/bench_speed.py report     [--quick]
@@ -222,11 +223,12 @@ def _kernel_figures(integ) -> None:
     finally:
         dr.set_flag(dr.JitFlag.KernelHistory, False)
     ms = [k.get("execution_time", 0.0) / 1000 for k in history]
-    # a level's own kernel (tracing, shading, shadow rays) has over a thousand operations;
-    # the rest are the scatters, compactions and sums between levels
+    # a kernel that traces and shades (a level's, or a chunk's with the stack schedule) has
+    # over a thousand operations; the rest are the scatters, compactions and sums around it
     big = sum(t for k, t in zip(history, ms, strict=True) if k.get("operation_count", 0) > 1000)
-    print(f"  kernels per render {len(history):,}; executing {sum(ms):.3f} s, of which "
-          f"{big:.3f} s in the levels' tracing and shading kernels (dr.kernel_history)")
+    print(f"  schedule {integ.schedule}; kernels per render {len(history):,}; executing "
+          f"{sum(ms):.3f} s, of which {big:.3f} s in the tracing and shading kernels "
+          "(dr.kernel_history)")
 
 
 def cmd_recursion(args) -> int:
@@ -241,17 +243,26 @@ def cmd_recursion(args) -> int:
         size=(n, n), max_depth=depth + 1, spp=args.spp)
     print(f"recursion: heckbert_minray, {n}x{n}, {args.spp} spp, DEPTH {depth}, backend "
           f"{name}; {machine_note()}", flush=True)
-    integ = Integrator(scene)
-    res = integ.render()  # warm-up: compiles each level's kernel
-    times = []
-    for _ in range(args.repeat):
-        t0 = time.perf_counter()
-        res = integ.render()
-        times.append(time.perf_counter() - t0)
-    t = statistics.median(times)
+    def rate(schedule):
+        integ = Integrator(scene, schedule=schedule)
+        res = integ.render()  # warm-up: compiles the kernels
+        times = []
+        for _ in range(args.repeat):
+            t0 = time.perf_counter()
+            res = integ.render()
+            times.append(time.perf_counter() - t0)
+        return integ, res, statistics.median(times)
+
+    integ, res, t = rate(args.schedule)
     peak = self_peak()  # before minray's count, which is computed in numpy
     ours = res.rays_total
     _kernel_figures(integ)
+    other = "wavefront" if integ.schedule == "stack" else "stack"
+    o_integ, o_res, o_t = rate(other)
+    if o_integ.schedule == other:
+        assert o_res.rays_per_level == res.rays_per_level  # the same rays, ray for ray
+        print(f"  the {other} schedule, for comparison: {o_t:.2f} s, "
+              f"{o_res.rays_total / o_t / 1e6:.1f} M rays/s (the tracer below: {integ.schedule})")
     mr = ray_count(scene.with_overrides(spp=1), depth)  # minray: one ray a pixel
     print(f"  rays: tracer {ours:,} ({sum(res.rays_per_level):,} + "
           f"{sum(res.shadow_rays_per_level):,} shadow), minray {mr.total:,} "
@@ -440,6 +451,9 @@ def main(argv=None) -> int:
     r.add_argument("--spp", type=int, default=16,
                    help="samples per pixel (16: the issue's figure; 1 renders minray's image)")
     r.add_argument("--repeat", type=int, default=3)
+    r.add_argument("--schedule", choices=("auto", "wavefront", "stack"), default="auto",
+                   help="the tracer's recursion schedule (auto: the stack here); the other "
+                        "one's rate is printed beside it")
 
     q = sub.add_parser("quality", help="time to an RMSE against Mitsuba's path")
     q.add_argument("scenes", nargs="*", default=GLASS)
