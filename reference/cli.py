@@ -1308,6 +1308,17 @@ class _Stdout:
         return getattr(self.stream, name)
 
 
+def _caused_by(e: BaseException, kind: type) -> bool:
+    """Whether ``e``, or an exception it was raised from or while handling, is a ``kind``."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, kind):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def main(argv: list[str] | None = None) -> int:
     from tracer.errors import one_line
 
@@ -1338,6 +1349,13 @@ def main(argv: list[str] | None = None) -> int:
         except (UserError, llvm.LLVMUnavailable, backend.BackendUnavailable) as e:
             return fail(str(e))
     except KeyboardInterrupt:
+        print("whitted: interrupted", file=sys.stderr)
+        return 130
+    except RuntimeError as e:
+        # Ctrl-C while Dr.Jit traces a symbolic loop or branch (Python called back from
+        # C++): Dr.Jit re-raises what the callback raised as a RuntimeError caused by it.
+        if not _caused_by(e, KeyboardInterrupt):
+            raise
         print("whitted: interrupted", file=sys.stderr)
         return 130
     except BrokenPipeError:  # `whitted scenes | head`: the reader has all it wants

@@ -563,6 +563,33 @@ def test_interrupted_depth_sweep_leaves_no_partial_folder(tmp_path):
     assert not out.exists() and list(tmp_path.iterdir()) == []
 
 
+def test_ctrl_c_inside_a_symbolic_loop_is_an_interrupt(tmp_path, monkeypatch, capsys):
+    """Dr.Jit re-raises a KeyboardInterrupt from a loop body it traces as a RuntimeError
+    caused by it; the command still reports an interrupt (exit 130), not an error.
+    (The test above met it by chance, when its Ctrl-C fell inside the tracing.)"""
+    import drjit as dr
+
+    from reference import cli
+    from tracer.backend import jit
+
+    def body(i):
+        raise KeyboardInterrupt
+
+    def interrupted(args):
+        dr.while_loop((jit.UInt32(0),), lambda i: i < 3, body)
+
+    def failing(args):
+        raise RuntimeError("another failure")
+
+    scene = write_scene(tmp_path, MINIMAL)
+    monkeypatch.setattr(cli, "cmd_render", interrupted)
+    assert cli.main(["render", str(scene), "-o", str(tmp_path / "x.exr")]) == 130
+    assert capsys.readouterr().err == "whitted: interrupted\n"
+    monkeypatch.setattr(cli, "cmd_render", failing)
+    with pytest.raises(RuntimeError, match="another failure"):
+        cli.main(["render", str(scene), "-o", str(tmp_path / "x.exr")])
+
+
 def test_a_full_stdout_is_one_line_not_a_traceback(tmp_path):
     scene = write_scene(tmp_path, MINIMAL)
     with open("/dev/full", "w") as full:
