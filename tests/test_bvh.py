@@ -365,3 +365,26 @@ def test_bad_input_is_refused():
         build_bvh(p, p, np.full((2, 3), np.nan))
     with pytest.raises(ValueError, match="max_leaf"):
         build_bvh(p, p, p, max_leaf=8)
+
+
+def test_a_scenes_occlusion_agrees_with_its_closest_hit(jit):
+    """Geometry.occluded, where a mesh stops at its first hit and later blocks test only
+    the rays not yet blocked, answers as the closest hit does: two meshes and a floor
+    (mesh_knot), rays from points all over the scene, active lanes or not."""
+    from reference.cli import resolve_scene
+    from tracer import load_scene
+    from tracer.geometry import Geometry
+
+    geo = Geometry(load_scene(resolve_scene("mesh_knot")))
+    assert sum(b.any_hit for b in geo.blocks) == 2 and len(geo.blocks) == 3
+    rng = np.random.default_rng(4)
+    o, d = random_rays(rng, 20000, [-3, -0.5, -3], [3, 3, 3])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)  # the geometry's rays are unit vectors
+    tmax = jit.Float(rng.uniform(0.0, 6.0, len(o)).astype(np.float32))
+    occ = geo.occluded(v3(jit, o), v3(jit, d), tmax).numpy()
+    ref = geo.closest_hit(v3(jit, o), v3(jit, d), tmax).valid.numpy()
+    np.testing.assert_array_equal(occ, ref)
+    assert 0.05 < occ.mean() < 0.95
+    active = rng.random(len(o)) < 0.5
+    occ_a = geo.occluded(v3(jit, o), v3(jit, d), tmax, jit.Bool(active)).numpy()
+    np.testing.assert_array_equal(occ_a, ref & active)

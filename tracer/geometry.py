@@ -125,6 +125,16 @@ class _Block:
         """(p, n, ns, uv) for lanes in ``mask``, whose local primitive index is k."""
         raise NotImplementedError
 
+    #: whether :meth:`occluded` stops at the first hit (else it is the closest hit's)
+    any_hit = False
+
+    def occluded(self, o, d, tmax, active):
+        """Where one of the block's primitives lies on the ray at 0 < t < tmax (lanes in
+        ``active``; others may answer anything): by default its closest hit."""
+        _, prim = self.intersect(o, d, tmax, dr.full(jit.UInt32, INVALID, dr.width(tmax)),
+                                 active)
+        return prim != INVALID
+
     def _update(self, ti, hit, i, t, prim):
         return dr.select(hit, ti, t), dr.select(hit, i + self.base, prim)
 
@@ -374,6 +384,11 @@ class _MeshBlock(_Block):
         ti, tri, _, _ = self.bvh.closest_hit(o, d, t, active)
         hit = tri != INVALID
         return self._update(ti, hit, tri, t, prim)
+
+    any_hit = True
+
+    def occluded(self, o, d, tmax, active):
+        return self.bvh.occluded(o, d, tmax, active)
 
     def surface(self, k, o, d, t, mask):
         i0 = dr.gather(jit.UInt32, self.faces, 3 * k, mask)
@@ -693,8 +708,40 @@ class Geometry:
         return Hit(*self._masked(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, n)))
 
     def occluded(self, o, d, tmax, active=True):
-        """True where something blocks the segment from o along d shorter than tmax."""
-        return self.closest_hit(o, d, tmax, active).valid
+        """True where something blocks the segment from o along d shorter than tmax.
+
+        Each block answers for itself (:meth:`_Block.occluded`): a mesh stops at the
+        first triangle its BVH finds in the segment rather than the nearest, and a
+        later block tests only the rays no earlier one blocked. The answer is the
+        closest hit's (a hit in (0, tmax) exists or not); on the 144,000-triangle
+        knot (``benchmarks/bench_mesh.py``) the shadow rays' any-hit took the render
+        from 0.346 to 0.318 s.
+        """
+        if not any(block.any_hit for block in self.blocks):
+            # Without a block that can stop early, the closest hit is as fast (slightly
+            # faster on three_lights, 0.042-0.044 s against 0.046-0.047 s at 320x240).
+            return self.closest_hit(o, d, tmax, active).valid
+        n = dr.width(o)
+        tmax = jit.Float(tmax) + dr.zeros(jit.Float, n)
+        if active is True:
+            return self._any(o, d, tmax, dr.full(jit.Bool, True, n))
+        return self._any_masked(o, d, tmax, jit.Bool(active) | dr.zeros(jit.Bool, n))
+
+    @backend.syntax
+    def _any_masked(self, o, d, tmax, active):
+        blocked = dr.zeros(jit.Bool, dr.width(tmax))
+        # At most once, as in _masked; inactive lanes keep False (the loop's condition).
+        todo = jit.Bool(active)
+        while todo:
+            blocked = self._any(o, d, tmax, active)
+            todo = jit.Bool(False)
+        return blocked
+
+    def _any(self, o, d, tmax, active):
+        blocked = dr.zeros(jit.Bool, dr.width(tmax))
+        for block in self.blocks:
+            blocked = blocked | block.occluded(o, d, tmax, active & ~blocked)
+        return blocked
 
     @backend.syntax
     def _masked(self, o, d, t, prim, active):
