@@ -570,9 +570,12 @@ class Integrator:
         # Per-packet sums of the lanes' counts, level-major, then one sum a count.
         packets = (n + 15) // 16
         total = dr.zeros(jit.UInt32, 3 * max_depth * packets)
+        # The chunk's size is not written into the kernel (opaque), so that chunks of
+        # every size share it: a literal here made each image size compile its own.
+        stride = dr.opaque(jit.UInt32, packets)
         packet = b.slot >> 4
         for j in range(3 * max_depth):
-            dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * packets + packet,
+            dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * stride + packet,
                               mode=dr.ReduceMode.Local)
         dr.eval(L, total)
         return L, dr.block_sum(jit.UInt64(total), packets)
