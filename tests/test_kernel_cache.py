@@ -59,3 +59,20 @@ def test_a_scene_built_again_gives_the_same_kernels(name):
     for _ in range(3):
         again = load_scene(resolve_scene(name)).with_overrides(size=(16, 12), spp=1)
         assert _hashes(lambda s=again: Integrator(s).render()) == first
+
+
+def test_nearby_max_depths_share_the_stack_kernel():
+    """The stack schedule sizes its kernel for max_depth rounded up to a multiple of 8,
+    with max_depth itself an opaque value: a depth sweep compiles a kernel per 8 depths,
+    not one per depth."""
+    backend.use()
+    scene = load_scene(resolve_scene("glass_sphere")).with_overrides(size=(16, 12), spp=1)
+
+    def kernels(max_depth):
+        integ = Integrator(scene.with_overrides(max_depth=max_depth))
+        assert integ.schedule == "stack"
+        integ.render()  # the first render and later ones may differ (README, Speed)
+        return _hashes(integ.render)
+
+    assert kernels(3) == kernels(8) == kernels(5)
+    assert kernels(9) == kernels(16) != kernels(8)
