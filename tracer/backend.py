@@ -196,9 +196,9 @@ def upload(array_type, values, dtype):
 def upload_rows(array_type, rows, dtype="float32"):
     """A vector array type (``jit.Array3f``, ``jit.Array2f``) of (N, k) rows, one
     :func:`upload` per component."""
+    import drjit as dr
     import numpy as np
 
-    width = len(array_type())
+    width = dr.size_v(array_type)
     a = np.asarray(rows, dtype=dtype).reshape(-1, width)
-    scalar = type(array_type()[0])
-    return array_type(*(upload(scalar, a[:, k], dtype) for k in range(width)))
+    return array_type(*(upload(dr.value_t(array_type), a[:, k], dtype) for k in range(width)))

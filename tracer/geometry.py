@@ -705,7 +705,9 @@ class Geometry:
         prim = dr.full(jit.UInt32, INVALID, n)
         if active is True:
             return Hit(*self._all(o, d, t, prim, jit.Bool(True)))
-        return Hit(*self._masked(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, n)))
+        active = jit.Bool(active) | dr.zeros(jit.Bool, n)
+        return Hit(*self._once(active, lambda t, prim: self._all(o, d, t, prim, active),
+                               (t, prim)))
 
     def occluded(self, o, d, tmax, active=True):
         """True where something blocks the segment from o along d shorter than tmax.
@@ -725,17 +727,10 @@ class Geometry:
         tmax = jit.Float(tmax) + dr.zeros(jit.Float, n)
         if active is True:
             return self._any(o, d, tmax, dr.full(jit.Bool, True, n))
-        return self._any_masked(o, d, tmax, jit.Bool(active) | dr.zeros(jit.Bool, n))
-
-    @backend.syntax
-    def _any_masked(self, o, d, tmax, active):
-        blocked = dr.zeros(jit.Bool, dr.width(tmax))
-        # At most once, as in _masked; inactive lanes keep False (the loop's condition).
-        todo = jit.Bool(active)
-        while todo:
-            blocked = self._any(o, d, tmax, active)
-            todo = jit.Bool(False)
-        return blocked
+        active = jit.Bool(active) | dr.zeros(jit.Bool, n)
+        # Inactive lanes keep False (the loop's condition).
+        return self._once(active, lambda blocked: (self._any(o, d, tmax, active),),
+                          (dr.zeros(jit.Bool, n),))[0]
 
     def _any(self, o, d, tmax, active):
         blocked = dr.zeros(jit.Bool, dr.width(tmax))
@@ -743,14 +738,16 @@ class Geometry:
             blocked = blocked | block.occluded(o, d, tmax, active & ~blocked)
         return blocked
 
+    @staticmethod
     @backend.syntax
-    def _masked(self, o, d, t, prim, active):
-        # A loop that runs at most once: the packets without an active lane skip it.
+    def _once(active, step, state: tuple) -> tuple:
+        """``step(*state)`` in a loop that runs at most once: the SIMD packets without an
+        active lane skip it, and lanes outside ``active`` keep ``state``."""
         todo = jit.Bool(active)
         while todo:
-            t, prim = self._all(o, d, t, prim, active)
+            state = step(*state)
             todo = jit.Bool(False)
-        return t, prim
+        return state
 
     def _all(self, o, d, t, prim, active):
         for block in self.blocks:

@@ -301,7 +301,6 @@ class Integrator:
         #: "wavefront" (a kernel a level, :meth:`_level`) or "stack" (a kernel a chunk,
         #: :meth:`_render_stack`)
         self.schedule = schedule
-        self.per_sample = schedule == "stack"
 
     # ------------------------------------------------------------------ one level
 
@@ -505,11 +504,11 @@ class Integrator:
         wavefront ran 684 kernels a render.
 
         A lane keeps at most ``slots - 1`` rays pending per level below it, so the stack
-        holds (slots - 1) max_depth rays. The counts (rays, significant rays and
-        shadow rays of each level) are summed per lane in local memory, added per
-        SIMD packet with one scatter each after the loop, and summed per level by
-        the caller: a jit.UInt32 of 3 x ``levels`` values, (rays, significant,
-        shadow) of level 1, then of level 2, ...
+        holds (slots - 1) max_depth rays (it has room for (slots - 1) ``levels``). The
+        counts (rays, significant rays and shadow rays of each level) are summed per
+        lane in local memory, added per SIMD packet with one scatter each after the
+        loop, and summed per level by the caller: a jit.UInt32 of 3 x ``levels``
+        values, (rays, significant, shadow) of level 1, then of level 2, ...
 
         The stack and the counts are sized for ``levels``, max_depth rounded up to a
         multiple of 8, and max_depth enters the kernel as an opaque value: one kernel
@@ -658,7 +657,7 @@ class Integrator:
             if self.dfa is not None:  # every path ends at the eye: read E first
                 state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), count * spp)
             camera = _Batch(o, d, ones, slot, state, first, spp, tmax)
-            if self.per_sample:
+            if self.schedule == "stack":
                 radiance.value, sums = self._render_stack(camera)
                 counts.append(sums)
             else:
