@@ -40,7 +40,7 @@ area light, or a background that is not a hit term).
 Pixel samples sit at the centres of n x n strata, or at random inside them
 with the film's ``jitter``; with the box filter a pixel is the mean of its
 own samples, with the gaussian filter every sample is splatted onto the
-pixels within the filter's radius (:func:`splat_gaussian`).
+pixels within the filter's radius (:class:`_Splat`).
 
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
 that grows beyond the chunk size is split and processed depth-first.
@@ -625,8 +625,18 @@ class Integrator:
     # ------------------------------------------------------------------ the image
 
     def render(self, progress: Callable[[int, int], None] | None = None,
-               moments: bool = False) -> RenderResult:
-        """Render the image; ``moments`` also estimates each pixel's variance."""
+               moments: bool = False, seed: int | None = None) -> RenderResult:
+        """Render the image; ``moments`` also estimates each pixel's variance.
+
+        ``seed``: this render's seed, instead of the one the Integrator was made with (a
+        caller that pools seeds builds the scene once).
+        """
+        if seed is not None:
+            saved, self.seed = self.seed, seed32(seed)
+            try:
+                return self.render(progress, moments)
+            finally:
+                self.seed = saved
         scene = self.scene
         W, H = scene.film.width, scene.film.height
         n = scene.film.strata
@@ -671,7 +681,7 @@ class Integrator:
                         for part in reversed(nxt.split(self.chunk_samples)):
                             stack.append((depth + 1, part))
             if splat is not None:
-                splat.add(radiance.value.numpy().T, fx.numpy(), fy.numpy())
+                splat.add(radiance.value, fx, fy, first, count, spp)
             else:
                 L = radiance.value
                 image[first:first + count] = (dr.block_sum(L, spp) * (1.0 / spp)).numpy().T
@@ -710,18 +720,18 @@ class Integrator:
                             variance)
 
 
-def gaussian_weight(d: np.ndarray, stddev: float) -> np.ndarray:
+def gaussian_weight(d, stddev: float):
     """Mitsuba's ``gaussian`` reconstruction filter at offsets d (pixels), one axis.
 
     exp(-d^2 / (2 stddev^2)) - exp(-r^2 / (2 stddev^2)) for |d| < r = 4 stddev,
     else 0: the Gaussian lowered so that it reaches zero at the radius (Mitsuba 3,
     ``src/rfilters/gaussian.cpp``; pbrt-v4 8.8.3 uses the same shift). Weights of
-    a pixel are the product of the two axes' weights.
+    a pixel are the product of the two axes' weights. ``d``: a Dr.Jit array.
     """
     r = 4 * stddev
     alpha = -1 / (2 * stddev * stddev)
-    w = np.exp(alpha * d * d) - np.exp(alpha * r * r)
-    return np.where(np.abs(d) < r, np.maximum(w, 0), 0.0)
+    w = dr.maximum(dr.exp(alpha * d * d) - float(np.exp(alpha * r * r)), 0.0)
+    return dr.select(dr.abs(d) < r, w, 0.0)
 
 
 class _Splat:
@@ -731,44 +741,67 @@ class _Splat:
     Mitsuba's ``hdrfilm`` develops its image block (samples only inside the film:
     ``sample_border = false``). Variance (``moments``) is that of a weighted mean of
     independent samples: (E_w[L^2] - E_w[L]^2) sum(w^2) / sum(w)^2.
+
+    The sums are gathered, not scattered: per chunk, one lane per pixel the chunk's
+    samples can reach loops over the (2 reach + 1)^2 neighbouring pixels and their
+    samples in a fixed order, in float64, so a render is the same at every run (no
+    atomic adds in a thread-dependent order).
     """
 
     def __init__(self, film):
         self.W, self.H, self.stddev = film.width, film.height, film.stddev
         self.reach = int(np.ceil(film.filter_radius))
-        n = self.W * self.H
-        self.sum_wl = np.zeros((n, 3))
-        self.sum_wl2 = np.zeros((n, 3))
-        self.sum_w = np.zeros(n)
-        self.sum_w2 = np.zeros(n)
+        #: per pixel: sum w, sum w^2, sum w L (3), sum w L^2 (3)
+        self.sums = np.zeros((self.W * self.H, 8))
 
-    def add(self, L: np.ndarray, fx: np.ndarray, fy: np.ndarray) -> None:
-        L = L.astype(np.float64)
-        bx, by = np.floor(fx).astype(np.int64), np.floor(fy).astype(np.int64)
-        n = self.W * self.H
-        for oy in range(-self.reach, self.reach + 1):
-            iy = by + oy
-            wy = gaussian_weight(fy - (iy + 0.5), self.stddev)
-            for ox in range(-self.reach, self.reach + 1):
-                ix = bx + ox
-                w = gaussian_weight(fx - (ix + 0.5), self.stddev) * wy
-                ok = (ix >= 0) & (ix < self.W) & (iy >= 0) & (iy < self.H) & (w > 0)
-                idx, wk = (iy * self.W + ix)[ok], w[ok]
-                self.sum_w += np.bincount(idx, wk, n)
-                self.sum_w2 += np.bincount(idx, wk * wk, n)
-                for c in range(3):
-                    self.sum_wl[:, c] += np.bincount(idx, wk * L[ok, c], n)
-                    self.sum_wl2[:, c] += np.bincount(idx, wk * L[ok, c] ** 2, n)
+    def add(self, L, fx, fy, first: int, count: int, spp: int) -> None:
+        """Splat the chunk of ``count`` pixels from ``first`` (``spp`` samples each, in
+        order; ``L``, ``fx``, ``fy`` its samples' radiance and film positions)."""
+        F64, I32, U32 = jit.Float64, jit.Int32, jit.UInt32
+        W, H, r = self.W, self.H, self.reach
+        span = r * W + r   # pixels a sample reaches before or after its own
+        lo, hi = max(0, first - span), min(W * H, first + count + span)
+        t = I32(dr.arange(U32, hi - lo)) + dr.opaque(I32, lo)
+        tx, ty = t % W, t // W
+        cx, cy = F64(tx) + 0.5, F64(ty) + 0.5
+        side = 2 * r + 1
+        f0, n0 = dr.opaque(I32, first), dr.opaque(I32, count)
+
+        def weight(d):
+            return gaussian_weight(d, self.stddev)
+
+        def body(k, acc):
+            o = k // spp
+            s = k - o * spp
+            oy, ox = o // side - r, o % side - r
+            px, py = tx - ox, ty - oy
+            p = py * W + px - f0
+            ok = (px >= 0) & (px < W) & (py >= 0) & (py < H) & (p >= 0) & (p < n0)
+            idx = U32(p * spp + s)
+            w = (weight(F64(dr.gather(jit.Float, fx, idx, ok)) - cx)
+                 * weight(F64(dr.gather(jit.Float, fy, idx, ok)) - cy))
+            w = dr.select(ok, w, 0.0)
+            rad = jit.Array3f64(dr.gather(jit.Array3f, L, idx, ok))
+            wl = rad * w
+            return k + 1, [acc[0] + w, acc[1] + w * w,
+                           *(acc[2 + c] + wl[c] for c in range(3)),
+                           *(acc[5 + c] + wl[c] * rad[c] for c in range(3))]
+
+        acc = [dr.zeros(F64, hi - lo) for _ in range(8)]
+        _, acc = dr.while_loop((I32(0), acc), lambda k, acc: k < side * side * spp, body,
+                               labels=("k", "acc"))
+        dr.eval(acc)   # one kernel for the eight sums (each read alone would run the loop)
+        self.sums[lo:hi] += np.stack([a.numpy() for a in acc], axis=1)
 
     def image(self, moments: bool):
-        w = np.maximum(self.sum_w, 1e-300)[:, None]
-        mean = self.sum_wl / w
+        s = self.sums
+        w = np.maximum(s[:, 0], 1e-300)[:, None]
+        mean = s[:, 2:5] / w
         shape = (self.H, self.W, 3)
         variance = None
         if moments:
-            spread = np.maximum(self.sum_wl2 / w - mean ** 2, 0)
-            variance = (spread * (self.sum_w2[:, None] / (w * w))).astype(np.float32)
-            variance = variance.reshape(shape)
+            spread = np.maximum(s[:, 5:8] / w - mean ** 2, 0)
+            variance = (spread * (s[:, 1:2] / (w * w))).astype(np.float32).reshape(shape)
         return mean.astype(np.float32).reshape(shape), variance
 
 
