@@ -388,3 +388,24 @@ def test_a_scenes_occlusion_agrees_with_its_closest_hit(jit):
     active = rng.random(len(o)) < 0.5
     occ_a = geo.occluded(v3(jit, o), v3(jit, d), tmax, jit.Bool(active)).numpy()
     np.testing.assert_array_equal(occ_a, ref & active)
+
+
+def test_the_same_triangles_share_a_tree_and_different_ones_do_not(jit):
+    """shared_bvh: a mesh built again (the formula-bug sweep builds a scene once per bug)
+    gets the tree already built for the same corners; a mesh that differs in one
+    coordinate gets a tree of its own, which finds that triangle where it now is."""
+    from tracer.bvh import shared_bvh
+
+    p0, p1, p2 = soup(np.random.default_rng(11), 500)
+    first = shared_bvh(p0, p1, p2)
+    assert shared_bvh(p0.copy(), p1.copy(), p2.copy()) is first
+    moved = p0.copy()
+    moved[7] += 0.25
+    other = shared_bvh(moved, p1, p2)
+    assert other is not first
+    rng = np.random.default_rng(12)
+    o, d = random_rays(rng, 4000, -1.5, 1.5)
+    tmax = np.full(len(o), 1e30)
+    t, tri = trace(jit, other, o, d, tmax)[:2]
+    t_ref, tri_ref = brute_force(jit, moved, p1, p2, o, d, tmax)[:2]
+    assert_same_hits(t, tri, t_ref, tri_ref)

@@ -57,7 +57,9 @@ never times).
 
 from __future__ import annotations
 
+import hashlib
 import time
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import drjit as dr
@@ -68,7 +70,7 @@ from tracer.backend import jit, upload
 from tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
-           "sah_cost"]
+           "sah_cost", "shared_bvh"]
 
 #: Triangle index reported for a ray that hits nothing.
 INVALID = 0xFFFFFFFF
@@ -885,3 +887,36 @@ def _slab(o, inv, lx, ly, lz, hx, hy, hz):
     tf = dr.minimum(dr.minimum(dr.maximum(t0x, t1x), dr.maximum(t0y, t1y)),
                     dr.maximum(t0z, t1z))
     return tn, tf
+
+
+#: The BVHs built last, by content (see :func:`shared_bvh`), newest last.
+_RECENT: OrderedDict = OrderedDict()
+#: How many :func:`shared_bvh` keeps, and the largest mesh it keeps one of (triangles).
+RECENT_COUNT = 4
+RECENT_MAX_TRIANGLES = 1 << 18
+
+
+def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
+    """``BVH(p0, p1, p2)``, or the one built for the same triangles a little earlier.
+
+    A process that builds one scene many times, as the formula-bug sweep does (a build
+    for each of the 17 bugs that reach the mesh_knot scene), builds each tree once.
+    A BVH is never changed after its build, so the tree is shared as it is. Kept: the
+    last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by the bytes of
+    the corners and the backend. Its ``build_seconds`` stay those of its build.
+    """
+    p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
+                  for p in (p0, p1, p2))
+    if len(p0) > RECENT_MAX_TRIANGLES:
+        return BVH(p0, p1, p2)
+    h = hashlib.blake2b(backend.name().encode(), digest_size=20)
+    for p in (p0, p1, p2):
+        h.update(p.tobytes())
+    key = h.digest()
+    if key in _RECENT:
+        _RECENT.move_to_end(key)
+        return _RECENT[key]
+    bvh = _RECENT[key] = BVH(p0, p1, p2)
+    while len(_RECENT) > RECENT_COUNT:
+        _RECENT.popitem(last=False)
+    return bvh

@@ -365,11 +365,11 @@ class _MeshBlock(_Block):
     """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
 
     def __init__(self, mesh: Mesh):
-        from tracer.bvh import BVH
+        from tracer.bvh import shared_bvh
 
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
-        self.bvh = BVH(v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
+        self.bvh = shared_bvh(v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
         n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
         self.face_n = _v3(n)
