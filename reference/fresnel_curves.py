@@ -165,27 +165,33 @@ def _ours(cos_i: np.ndarray, eta: float):
 
 
 def _plugin_reflect_fraction(mi, ior: float, cos_i: np.ndarray, samples: int, seed: int):
-    """Reflections counted in ``samples`` calls of the dielectric plugin's sample() per angle."""
+    """Reflections counted in ``samples`` calls of the dielectric plugin's sample() per angle.
+
+    One Dr.Jit kernel draws, samples and counts (``samples`` consecutive lanes per angle,
+    summed by a block reduction): 18 million calls an ior and side at the full table.
+    """
     import drjit as dr
 
     bsdf = mi.load_dict({"type": "dielectric", "int_ior": float(ior), "ext_ior": 1.0})
     m = len(cos_i)
     n = m * samples
-    idx = np.repeat(np.arange(m), samples)
-    c = cos_i[idx].astype(np.float32)
-    s = np.sqrt(np.maximum(1 - c.astype(np.float64) ** 2, 0)).astype(np.float32)
+    idx = dr.arange(mi.UInt32, n) // samples
+    c = dr.gather(mi.Float, mi.Float(cos_i.astype(np.float32)), idx)
+    sin_i = np.sqrt(np.maximum(1 - cos_i.astype(np.float64) ** 2, 0)).astype(np.float32)
     si = dr.zeros(mi.SurfaceInteraction3f, n)
-    si.wi = mi.Vector3f(mi.Float(s), mi.Float(np.zeros(n, np.float32)), mi.Float(c))
+    si.wi = mi.Vector3f(dr.gather(mi.Float, mi.Float(sin_i), idx), 0.0, c)
     si.sh_frame = mi.Frame3f(mi.Vector3f(0, 0, 1))
-    rng = np.random.default_rng(seed)
-    # Uniform in (0, 1): the plugin reflects when u <= R, so u = 0 would reflect even
-    # where R = 0 (equal indices); 24-bit values are exact in float32.
-    u1 = mi.Float((rng.integers(1, 1 << 24, n) / float(1 << 24)).astype(np.float32))
+    # Independent uniform numbers, one PCG32 stream a lane (O'Neill 2014), as odd multiples
+    # of 2^-24: inside (0, 1), since the plugin reflects when u <= R and u = 0 would
+    # reflect even where R = 0 (equal indices); 24-bit values are exact in float32.
+    rng = mi.PCG32(n, dr.opaque(mi.UInt64, 0x853C49E6748FEA9B + seed),
+                   dr.arange(mi.UInt64, n))
+    u1 = mi.Float((rng.next_uint32() >> 8) | 1) * (1.0 / (1 << 24))
     bs, weight = bsdf.sample(mi.BSDFContext(), si, u1, mi.Point2f(0.5, 0.5))
-    reflected = np.asarray(mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection))
-    valid = np.asarray(dr.max(weight) > 0) | reflected
-    k = np.bincount(idx, weights=reflected & valid, minlength=m)
-    return k
+    reflected = mi.has_flag(bs.sampled_type, mi.BSDFFlags.DeltaReflection)
+    valid = (dr.max(weight) > 0) | reflected
+    k = dr.block_sum(dr.select(reflected & valid, mi.UInt32(1), mi.UInt32(0)), samples)
+    return np.asarray(k, dtype=np.float64)
 
 
 def fresnel_table(iors=DEFAULT_IORS, step: float = 0.5, samples: int = 100_000,

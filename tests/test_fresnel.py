@@ -178,3 +178,25 @@ def test_float32_tolerance_grows_near_the_critical_angle():
     crit = math.asin(1 / eta)
     tol = float32_tolerance(-np.cos(np.array([0.2, crit - 1e-5])), eta)
     assert tol[1] > 100 * tol[0]
+
+
+def test_plugin_curve_check_passes_mitsubas_dielectric_and_fails_a_shifted_ior(monkeypatch):
+    """The Fresnel table's plugin check: the reflection fraction of Mitsuba's dielectric,
+    k of N binomial draws per angle, must hold the exact R in its Wilson interval at
+    1 - 0.01 / M (Bonferroni over the M angles; a correct plugin fails with probability
+    below 1 %, at the fixed seed: not at all). A plugin 2 % off in ior moves the critical
+    angle inside the glass by about a degree, where R jumps from below 1 to 1, far
+    outside any interval (at ior 1, where R = 0, any reflection at all fails); at the quick
+    table's 20,000 draws each ior must fail."""
+    from reference import fresnel_curves as fc
+
+    table = fc.fresnel_table(fc.DEFAULT_IORS, step=1.0, samples=20_000)
+    assert table.passed
+    assert all(r["exact_within_plugin_interval"] for r in table.summary)
+    counted = fc._plugin_reflect_fraction
+    monkeypatch.setattr(fc, "_plugin_reflect_fraction",
+                        lambda mi, ior, *a: counted(mi, ior * 1.02, *a))
+    shifted = fc.fresnel_table(fc.DEFAULT_IORS, step=1.0, samples=20_000)
+    assert not shifted.passed
+    assert {r["ior"] for r in shifted.summary if not r["exact_within_plugin_interval"]} == set(
+        fc.DEFAULT_IORS)
