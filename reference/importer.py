@@ -323,8 +323,9 @@ def render_imported(scene, seeds: int = 8):
 
     n = seeds if (scene.film.jitter or scene.samples_lights()) else 1
     rgb = var_y = 0.0
+    integ = Integrator(scene)
     for k in range(n):
-        r = Integrator(scene, seed=k).render(moments=True)
+        r = integ.render(moments=True, seed=k)
         rgb = rgb + r.image.astype(np.float64) / n
         sd = np.sqrt(r.variance.astype(np.float64))
         var_y = var_y + (sd @ LUMINANCE) ** 2 / (n * n)

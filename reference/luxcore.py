@@ -35,11 +35,12 @@ threads never share a process with Dr.Jit.
 from __future__ import annotations
 
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -119,52 +120,100 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
     runs past its time limit (``timeout``, default: start-up plus
     PASS_TIMEOUT per pass).
     """
+    return start_many(scenes, passes, seed, spp_per_pass, timeout,
+                      subsamples).results(progress)
+
+
+def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
+               spp_per_pass: int = SPP_PER_PASS, timeout: float | None = None,
+               subsamples: int = SUBSAMPLES) -> LuxJob:
+    """:func:`render_many` started: the child renders while the caller goes on, and
+    :meth:`LuxJob.results` waits for it (``whitted report`` runs its formula-bug sweep
+    meanwhile). A scene that does not convert is refused here, before the child starts."""
     require()
     descs = [describe(s, subsamples=subsamples) for s in scenes]  # refuse before starting
     seeds = [seed * 1000 + k for k in range(passes)]
     total = passes * len(scenes)
     if timeout is None:
         timeout = STARTUP_TIMEOUT + PASS_TIMEOUT * total
-    with tempfile.TemporaryDirectory(prefix="whitted-luxcore-") as tmp:
+    tmp = Path(tempfile.mkdtemp(prefix="whitted-luxcore-"))
+    try:
         jobs = []
         for i, d in enumerate(descs):
-            job = Path(tmp) / f"job{i}.npz"
+            job = tmp / f"job{i}.npz"
             _write_job(job, d, seeds, spp_per_pass, PASS_TIMEOUT)
             jobs.append(job)
-        start = time.perf_counter()
-        done = 0
-        env = dict(os.environ)
+        # the child's messages go to a file, not a pipe, which nobody reads while the
+        # caller works and which would stop the child when full
+        log = open(tmp / "child.log", "w+")
         proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
                                  *map(str, jobs)], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.PIPE, text=True, env=env,
+                                stderr=log, text=True, env=dict(os.environ),
                                 cwd=str(Path(__file__).resolve().parent.parent))
-        tail: list[str] = []
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    return LuxJob(proc, tmp, log, descs, jobs, total, timeout, spp_per_pass)
+
+
+@dataclass
+class LuxJob:
+    """A LuxCore child at work on a list of scenes (:func:`start_many`)."""
+    proc: subprocess.Popen
+    tmp: Path
+    log: object
+    descs: list
+    jobs: list
+    total: int
+    timeout: float
+    spp_per_pass: int
+    start: float = field(default_factory=time.perf_counter)
+
+    def results(self, progress=None) -> list[LuxResult]:
+        """Wait for the child; its images in the scenes' order (see :func:`render_many`).
+
+        ``seconds`` of a result is the child's time since its start over the scenes,
+        whatever else the machine did meanwhile."""
         try:
-            for line in proc.stderr:
-                if line.startswith("@pass"):
-                    done += 1
-                    if progress is not None:
-                        progress(done, total)
-                elif line.strip():
-                    tail = (tail + [line.strip()])[-5:]
-                if time.perf_counter() - start > timeout:
-                    raise subprocess.TimeoutExpired(proc.args, timeout)
-            proc.wait(timeout=max(1.0, timeout - (time.perf_counter() - start)))
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
-            raise UserError(f"LuxCore ran past its time limit of {timeout:.0f} s") from None
-        seconds = time.perf_counter() - start
-        if proc.returncode != 0:
-            why = next((t for t in reversed(tail) if not t.startswith("[")), None) or (
-                tail[-1] if tail else f"exit status {proc.returncode}")
-            raise UserError(f"LuxCore failed: {why}")
-        results = []
-        for d, job in zip(descs, jobs, strict=True):
-            with np.load(str(job)[:-4] + ".out.npz") as out:
-                films = out["passes"]
-            results.append(_result(d, films, spp_per_pass, seconds / len(descs)))
-    return results
+            done, tail, part = 0, [], ""
+            self.log.seek(0)
+            while True:
+                exited = self.proc.poll() is not None
+                part += self.log.read()
+                *lines, part = part.split("\n")
+                for line in lines:
+                    if line.startswith("@pass"):
+                        done += 1
+                        if progress is not None:
+                            progress(done, self.total)
+                    elif line.strip():
+                        tail = (tail + [line.strip()])[-5:]
+                if exited:
+                    break
+                if time.perf_counter() - self.start > self.timeout:
+                    raise UserError(f"LuxCore ran past its time limit of {self.timeout:.0f} s")
+                time.sleep(0.02)
+            seconds = time.perf_counter() - self.start
+            if self.proc.returncode != 0:
+                why = next((t for t in reversed(tail) if not t.startswith("[")), None) or (
+                    tail[-1] if tail else f"exit status {self.proc.returncode}")
+                raise UserError(f"LuxCore failed: {why}")
+            results = []
+            for d, job in zip(self.descs, self.jobs, strict=True):
+                with np.load(str(job)[:-4] + ".out.npz") as out:
+                    films = out["passes"]
+                results.append(_result(d, films, self.spp_per_pass, seconds / len(self.descs)))
+            return results
+        finally:
+            self.close()
+
+    def close(self) -> None:
+        """Stop the child if it still runs, and remove its files."""
+        if self.proc.poll() is None:
+            self.proc.kill()
+            self.proc.wait()
+        self.log.close()
+        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 def _result(desc: Description, films: np.ndarray, spp_per_pass: int,

@@ -305,21 +305,31 @@ def _detail(pairs: dict, odd: str, with_odd: list[str]) -> str:
     return "; ".join(parts)
 
 
-def compare_three(scenes: list, progress=None, quick: bool = False,
-                  main: list | None = None) -> list[ThreeWay]:
-    """The three-way verdict of each scene (one LuxCore child process for all of them).
+@dataclass
+class Started:
+    """:func:`start_three`'s work: the scenes at LuxCore's size, why each one cannot be
+    compared (None where it can), and the LuxCore child rendering those that can."""
+    scenes: list
+    small: list
+    why: list
+    job: object = None       # reference.luxcore.LuxJob, None when no scene is compared
 
-    ``main``: per scene, the main tracer-Mitsuba comparison (``whitted compare`` at the
-    scene's own settings) as ``{"passed", "checks"}``, which is that pair's verdict;
-    run here (:func:`reference.compare.compare_scene`) where not given. ``quick``:
-    QUICK_PIXELS pixels. Scenes that do not convert, or cannot be compared, get the
-    one-line reason.
+    def close(self) -> None:
+        if self.job is not None:
+            self.job.close()
+
+
+def start_three(scenes: list, quick: bool = False) -> Started:
+    """Convert the scenes and start LuxCore on those it can compare (one child process).
+
+    :func:`compare_three` finishes the work; in between the caller may go on (``whitted
+    report`` runs the formula-bug sweep while LuxCore renders). A scene that does not
+    convert gets its one-line reason.
     """
     from reference import luxcore
-    from reference.compare import comparable, regions_of
+    from reference.compare import comparable
     from reference.luxcore_scene import describe
     from tracer.errors import UserError
-    from tracer.integrator import material_ids
 
     small = [comparable(luxcore_scene(s, QUICK_PIXELS if quick else PIXELS)) for s in scenes]
     why = []
@@ -332,17 +342,41 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
                 reason = str(e)
         why.append(reason)
     todo = [s for s, w in zip(small, why, strict=True) if w is None]
-    results = iter(luxcore.render_many(todo, progress=progress) if todo else [])
+    return Started(list(scenes), small, why, luxcore.start_many(todo) if todo else None)
+
+
+def compare_three(scenes: list, progress=None, quick: bool = False,
+                  main: list | None = None, started: Started | None = None) -> list[ThreeWay]:
+    """The three-way verdict of each scene (one LuxCore child process for all of them).
+
+    ``main``: per scene, the main tracer-Mitsuba comparison (``whitted compare`` at the
+    scene's own settings) as ``{"passed", "checks"}``, which is that pair's verdict;
+    run here (:func:`reference.compare.compare_scene`) where not given. ``quick``:
+    QUICK_PIXELS pixels. Scenes that do not convert, or cannot be compared, get the
+    one-line reason. ``started``: :func:`start_three` of the same scenes, called
+    earlier (otherwise called here). The tracer's and Mitsuba's sides render while
+    LuxCore does, and ``progress(done, total)`` counts LuxCore's passes after that.
+    """
+    from reference.compare import regions_of
+    from tracer.integrator import material_ids
+
+    if started is None:
+        started = start_three(scenes, quick)
+    passes = QUICK_PASSES if quick else PASSES
+    try:
+        sides = {i: {"tracer": tracer_side(s, passes), "mitsuba": mitsuba_side(s, passes)}
+                 for i, (s, w) in enumerate(zip(started.small, started.why, strict=True))
+                 if w is None}
+        results = iter(started.job.results(progress) if started.job is not None else [])
+    finally:
+        started.close()
     out = []
-    for i, (s, reason) in enumerate(zip(small, why, strict=True)):
+    for i, (s, reason) in enumerate(zip(started.small, started.why, strict=True)):
         size = (s.film.width, s.film.height)
         if reason is not None:
             out.append(ThreeWay(s.name, size, {}, "not compared", None, reason))
             continue
-        lux = next(results)
-        passes = QUICK_PASSES if quick else PASSES
-        sides = {"tracer": tracer_side(s, passes), "mitsuba": mitsuba_side(s, passes),
-                 "luxcore": luxcore_side(lux)}
+        sides[i]["luxcore"] = luxcore_side(next(results))
         regions = regions_of(material_ids(s), list(s.materials))
         if main is not None:
             m = main[i]
@@ -356,8 +390,8 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
         pairs = {"tracer-mitsuba": {"passed": bool(m["passed"]), "checks": m["checks"],
                                     "worst": None, "from": "the main comparison"}}
         for a, b in (("tracer", "luxcore"), ("mitsuba", "luxcore")):
-            pairs[f"{a}-{b}"] = judge_pair(s, sides[a], sides[b], regions)
+            pairs[f"{a}-{b}"] = judge_pair(s, sides[i][a], sides[i][b], regions)
         verdict, odd, detail = three_way(pairs)
         out.append(ThreeWay(s.name, size, pairs, verdict, odd, detail,
-                            {k: v.seconds for k, v in sides.items()}))
+                            {k: v.seconds for k, v in sides[i].items()}))
     return out

@@ -419,15 +419,15 @@ class Unit:
 
         if self.reference == "onelobe":
             return statistical_verdict(self.scene, self.ref, tracer_image,
-                                       regions=self.regions).verdict.checks
+                                       regions=self.regions, with_flip=False).verdict.checks
         metrics = image_metrics(tracer_image, self.ref, with_flip=False)
         return judge(self.test, metrics, tracer_image, self.ref)[0].checks
 
 
 def _tracer_image(scene):
-    from tracer.integrator import Integrator
+    from reference.compare import shared_tracer_image
 
-    return Integrator(scene).render().image
+    return shared_tracer_image(scene)   # without a bug on: the comparison's render
 
 
 def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
@@ -447,9 +447,9 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         second_opinion_scene,
         ztest_passes,
     )
-    from reference.deterministic import DeterministicReference, shares_light_samples
+    from reference.deterministic import shares_light_samples
     from reference.materials import has_tracer_only_models
-    from reference.render import render_reference
+    from reference.render import deterministic_image, render_reference
     from tracer.integrator import material_ids
 
     full = scene
@@ -457,10 +457,10 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
     units = []
     if shares_light_samples(scene):
         units.append(Unit("deterministic", "deterministic", choose_test(scene),
-                          scene, DeterministicReference(scene).render().image))
+                          scene, deterministic_image(scene)))
         if scene is not full and has_tracer_only_models(full):
             units.append(Unit("tracer-only model", "deterministic", choose_test(full), full,
-                              DeterministicReference(full, models=True).render().image))
+                              deterministic_image(full, models=True)))
         second = scene.samples_lights()
     else:
         second = True   # no shared light samples: the one-lobe reference judges it alone

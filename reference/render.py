@@ -9,9 +9,23 @@ import numpy as np
 
 from reference import mitsuba
 from reference.mitsuba_scene import load
+from reference.shared import reused
 from tracer.scene import Scene
 
 INTEGRATORS = ("whitted", "direct", "path", "deterministic")
+
+def deterministic_image(scene: Scene, seed: int = 0, models: bool = False) -> np.ndarray:
+    """The deterministic reference's image (:mod:`reference.deterministic`; ``models``:
+    the harness's own models of the scene's tracer-only parts), shared as
+    :mod:`reference.shared` says."""
+    from reference.deterministic import DeterministicReference
+
+    return reused(lambda: DeterministicReference(scene, seed, models=models).render().image,
+                  scene, *_deterministic_key(seed, models))
+
+
+def _deterministic_key(seed: int, models: bool) -> tuple:
+    return ("deterministic image", seed, models)
 
 
 @dataclass
@@ -57,15 +71,25 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
 
     ``integrator = "deterministic"`` renders :mod:`reference.deterministic`
     instead (one pass; ``seed`` picks the tracer's light samples).
+
+    Inside :func:`reference.shared.shared` an equal call returns the first call's result.
     """
+    return reused(lambda: _render_reference(scene, integrator, seed, moments, jitter, passes),
+                  scene, integrator, seed, moments, jitter, passes)
+
+
+def _render_reference(scene: Scene, integrator: str, seed: int, moments: bool, jitter: bool,
+                      passes: int) -> ReferenceResult:
     if integrator == "deterministic":
         from reference.deterministic import DeterministicReference
 
         ref = DeterministicReference(scene, seed)
-        first = ref.render()
+        start = time.perf_counter()
+        image = reused(lambda: ref.render().image, scene, *_deterministic_key(seed, False))
+        first = time.perf_counter() - start
         warm = ref.render()  # kernels compiled: timed as the tracer is
-        return ReferenceResult(first.image, warm.seconds, first.spp, integrator, passes=1,
-                               seconds_total=first.seconds + warm.seconds)
+        return ReferenceResult(image, warm.seconds, warm.spp, integrator, passes=1,
+                               seconds_total=first + warm.seconds)
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown reference integrator {integrator!r}")
     from tracer.limits import check_render

@@ -140,12 +140,24 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     report then passes only if every bug is caught.
 
     ``luxcore``: also the three-way verdict of each scene with LuxCore
-    (:mod:`reference.luxcore_compare`, one LuxCore child process for all scenes).
+    (:mod:`reference.luxcore_compare`, one LuxCore child process for all scenes). The
+    child starts when the comparisons are done (their timings stay free of it) and
+    renders while the Fresnel curves and the sweep run; the imported scenes, timed too,
+    come after it.
     It does not change whether the report passes: that stays the tracer's verdict
     against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
     tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
     LuxCore, shown in the report, not a failure of the tracer.
     """
+    from reference.shared import shared
+
+    with shared():   # the sweep reuses the comparisons' references and clean renders
+        return _build_report(outdir, scene_paths, quick, log, fresnel, reference,
+                             second_opinion, mutants, luxcore, imported)
+
+
+def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_opinion,
+                  mutants, luxcore, imported) -> Report:
     from reference.compare import compare_scene
     from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
     from tracer import load_scene
@@ -175,42 +187,51 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
         test = result.test + (" + z-test" if result.second_opinion else "")
         log(f"[{i}/{total}] {scene.name:<20} {test:<22} "
             f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    started = None
     if luxcore:
-        from reference.luxcore_compare import compare_three
+        from reference.luxcore_compare import compare_three, start_three
 
-        t0 = time.perf_counter()
+        t_lux = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
-        log(f"LuxCore: three-way verdicts of {len(sized)} scenes")
-        threes = compare_three(sized, quick=quick,
+        started = start_three(sized, quick=quick)
+        log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while the "
+            "report goes on")
+    try:
+        if fresnel:
+            t0 = time.perf_counter()
+            params = QUICK_FRESNEL if quick else FULL_FRESNEL
+            table = fresnel_table(DEFAULT_IORS, params["step"], params["samples"])
+            plot(table, out / "fresnel.png")
+            report.fresnel = table.summary
+            report.fresnel_passed = table.passed
+            report.passed &= table.passed
+            log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
+                f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+        if mutants:
+            from reference import mutants as mutant_sweep
+
+            t0 = time.perf_counter()
+            log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
+                f"({'quick' if quick else 'full'} sizes)")
+            sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m))
+            report.mutants = sweep.to_json()
+            report.passed &= sweep.passed
+            log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
+                f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
+                f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    except BaseException:
+        if started is not None:
+            started.close()
+        raise
+    if luxcore:
+        threes = compare_three(sized, quick=quick, started=started,
                                main=[{"passed": s["pass"], "checks": s["checks"]}
                                      for s in report.scenes])
         for entry, t in zip(report.scenes, threes, strict=True):
             entry["luxcore"] = t.to_json()
             log(f"  {t.scene:<20} {t.verdict}" + (f" ({t.detail})" if t.detail else ""))
         log(f"LuxCore: {sum(t.compared for t in threes)} scenes compared "
-            f"({time.perf_counter() - t0:.1f} s)")
-    if fresnel:
-        t0 = time.perf_counter()
-        params = QUICK_FRESNEL if quick else FULL_FRESNEL
-        table = fresnel_table(DEFAULT_IORS, params["step"], params["samples"])
-        plot(table, out / "fresnel.png")
-        report.fresnel = table.summary
-        report.fresnel_passed = table.passed
-        report.passed &= table.passed
-        log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
-            f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
-    if mutants:
-        from reference import mutants as mutant_sweep
-
-        t0 = time.perf_counter()
-        log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
-            f"({'quick' if quick else 'full'} sizes)")
-        sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m))
-        report.mutants = sweep.to_json()
-        report.passed &= sweep.passed
-        log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
-            f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
-            f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+            f"({time.perf_counter() - t_lux:.1f} s since it started)")
     if imported:
         from reference.importer import imported_cases, validate_case
 

@@ -121,6 +121,17 @@ def test_child_past_its_time_limit_is_one_line(luxcore):
         luxcore.render_many([scene], passes=1, timeout=0.1)
 
 
+def test_a_started_child_left_unread_is_stopped_and_its_files_removed(luxcore):
+    """``whitted report`` starts LuxCore and goes on; if the report fails or is
+    interrupted before it reads the results, closing the job kills the child and removes
+    its folder (no orphan process, no files left in the temporary directory)."""
+    scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(8, 6))
+    job = luxcore.start_many([scene], passes=2)
+    assert job.proc.poll() is None and job.tmp.is_dir()
+    job.close()
+    assert job.proc.poll() is not None and not job.tmp.exists()
+
+
 def test_spot_light_profile_is_pbrt_falloff_over_cos(luxcore):
     """LuxCore's spot: I falloff(theta) / cos(theta), the finding behind spot_floor.
 

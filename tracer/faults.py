@@ -77,6 +77,13 @@ def current() -> frozenset[str]:
     return _active
 
 
+def asked(ids: Iterable[str]) -> None:
+    """Count ``ids`` as asked about, as if :func:`on` had been (for a result computed
+    earlier inside a :func:`recording` and reused now)."""
+    if _asked is not None:
+        _asked.update(ids)
+
+
 @contextmanager
 def active(*ids: str) -> Iterator[frozenset[str]]:
     """Switch the bugs ``ids`` on inside the block (nested blocks add to the outer ones).
