@@ -535,41 +535,67 @@ def heat_map(rel: np.ndarray, path: str | Path, title: str = "", lo: float = 1e-
              hi: float = 1.0, label: str = "|tracer - Mitsuba| / Mitsuba") -> None:
     """False-colour map of per-pixel relative difference on a log scale, with a scale bar.
 
-    The axes are placed by hand (fixed margins in inches), the scale bar has its decades
-    only, as plain text, and the PNG is compressed lightly: matplotlib's tight layout,
-    minor log ticks, mathtext and PNG compression took 0.25 of the 0.3 s a map cost, and
-    a report draws about 30.
+    Drawn with Pillow from matplotlib's ``inferno`` colour table and its DejaVu Sans
+    font: the same picture as a matplotlib figure (image, title, scale bar with its
+    decades, the label beside it) in 15 ms instead of 0.3 s, and a report draws about
+    30 of them.
     """
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    from matplotlib.colors import LogNorm
-    from matplotlib.ticker import FuncFormatter
+    from PIL import Image, ImageDraw
 
     h, w = rel.shape
-    fig_w = max(4.0, min(10.0, w / 40 + 1.6))
-    left, right, bar, gap, top, bottom = 0.1, 0.85, 0.16, 0.1, 0.3 if title else 0.1, 0.1
-    img_w = fig_w - left - gap - bar - right
-    fig_h = img_w * h / w + top + bottom
-    fig = plt.figure(figsize=(fig_w, fig_h), dpi=100)
-    ax = fig.add_axes((left / fig_w, bottom / fig_h, img_w / fig_w, 1 - (top + bottom) / fig_h))
-    cax = fig.add_axes(((left + img_w + gap) / fig_w, bottom / fig_h, bar / fig_w,
-                        1 - (top + bottom) / fig_h))
-    im = ax.imshow(np.clip(rel, lo, hi), cmap="inferno", norm=LogNorm(vmin=lo, vmax=hi),
-                   interpolation="nearest", aspect="auto")
-    ax.set_xticks([])
-    ax.set_yticks([])
+    # each pixel a k x k block: the image about 600 pixels wide and at least 240 tall
+    k = 1 if w >= 600 else int(np.clip(max(round(600 / w), math.ceil(240 / h)), 2, 32))
+    lut = _inferno_lut()
+    level = (np.log10(np.clip(np.nan_to_num(rel, nan=hi), lo, hi)) - math.log10(lo)) / (
+        math.log10(hi) - math.log10(lo))
+    rgb = lut[np.clip((level * 255).round().astype(np.int64), 0, 255)]
+    img = Image.fromarray(np.repeat(np.repeat(rgb, k, axis=0), k, axis=1), "RGB")
+    small, large = _font(11), _font(13)
+    top = 26 if title else 8
+    iw, ih = img.size
+    bar_x, bar_w = 8 + iw + 12, 16
+    width = max(bar_x + bar_w + 72, round(large.getlength(title)) + 16 if title else 0)
+    canvas = Image.new("RGB", (width, top + ih + 10), "white")
+    canvas.paste(img, (8, top))
+    draw = ImageDraw.Draw(canvas)
+    draw.rectangle((7, top - 1, 8 + iw, top + ih), outline="black")
     if title:
-        ax.set_title(title, fontsize=8)
-    cb = fig.colorbar(im, cax=cax)
-    cb.ax.minorticks_off()
-    # decades as plain text ("1e-4"): mathtext's 10^-4 was a third of a map's time
-    cb.ax.yaxis.set_major_formatter(FuncFormatter(lambda v, _: f"1e{round(math.log10(v))}"))
-    cb.set_label(label, fontsize=8)
-    cb.ax.tick_params(labelsize=7)
-    fig.savefig(path, pil_kwargs={"compress_level": 1})
-    plt.close(fig)
+        wide = large.getlength(title) > iw
+        draw.text((width / 2 if wide else 8 + iw / 2, top / 2), title, fill="black",
+                  font=large, anchor="mm")
+    ramp = lut[np.linspace(255, 0, ih).round().astype(np.int64)]
+    canvas.paste(Image.fromarray(np.repeat(ramp[:, None, :], bar_w, axis=1), "RGB"),
+                 (bar_x, top))
+    draw.rectangle((bar_x - 1, top - 1, bar_x + bar_w, top + ih), outline="black")
+    decades = range(round(math.log10(lo)), round(math.log10(hi)) + 1)
+    for e in decades:
+        y = top + ih - 1 - (e - math.log10(lo)) / (math.log10(hi) - math.log10(lo)) * (ih - 1)
+        draw.line((bar_x + bar_w, y, bar_x + bar_w + 3, y), fill="black")
+        draw.text((bar_x + bar_w + 5, y), f"1e{e}", fill="black", font=small, anchor="lm")
+    side = Image.new("RGB", (ih, 16), "white")
+    ImageDraw.Draw(side).text((ih / 2, 8), label, fill="black", font=small, anchor="mm")
+    canvas.paste(side.rotate(90, expand=True), (bar_x + bar_w + 48, top))
+    canvas.save(path, compress_level=1)
+
+
+def _inferno_lut() -> np.ndarray:
+    """matplotlib's ``inferno`` colour table, 256 x 3 uint8."""
+    from matplotlib import colormaps
+
+    return (colormaps["inferno"](np.linspace(0, 1, 256))[:, :3] * 255).round().astype(np.uint8)
+
+
+def _font(size: int):
+    """DejaVu Sans, the font matplotlib ships, at ``size`` pixels (Pillow's own if absent)."""
+    from PIL import ImageFont
+
+    try:
+        import matplotlib
+
+        return ImageFont.truetype(str(Path(matplotlib.get_data_path()) / "fonts" / "ttf"
+                                      / "DejaVuSans.ttf"), size)
+    except OSError:
+        return ImageFont.load_default(size)
 
 
 # ---------------------------------------------------------------- one scene, both sides

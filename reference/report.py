@@ -264,9 +264,10 @@ def light_paths(scene) -> tuple[dict, dict]:
     The four expressions partition every path a Whitted tracer makes, so the
     parts sum to the full render; the largest deviation of that sum is kept.
     """
+    from reference.compare import shared_tracer_image
     from tracer.integrator import Integrator
 
-    full = Integrator(scene).render().image
+    full = shared_tracer_image(scene)   # the comparison's render, where it is the same scene
     parts = {e: Integrator(scene, lpe=e).render().image for e in PARTITION}
     total = float(full.sum()) or 1.0
     shares = {e: float(img.sum()) / total for e, img in parts.items()}

@@ -362,3 +362,19 @@ def test_suite_page_has_one_working_viewer_per_graded_scene(tmp_path):
         b.wait("document.querySelectorAll('.wv[data-ready=\"1\"]').length === 2")
         exercise_viewer(b, 1, renders["three_lights"] * 1.03, renders["three_lights"],
                         ("your image", "reference"))
+
+
+def test_heat_map_colours_follow_the_log_scale(tmp_path):
+    """diff.png: a pixel's colour is inferno's at log10(rel) between 1e-8 and 1 (a
+    relative difference of 1e-4 sits halfway), each pixel drawn as one square block (of
+    32 x 32, the most, for an image this small)."""
+    from PIL import Image
+
+    from reference.compare import _inferno_lut, heat_map
+
+    heat_map(np.array([[1e-8, 1e-4, 1.0, 10.0]]), tmp_path / "d.png")
+    img = np.asarray(Image.open(tmp_path / "d.png").convert("RGB"))
+    lut = _inferno_lut()
+    k = 32   # the image's corner at (8, 8)
+    centre = [img[8 + k // 2, 8 + k * i + k // 2] for i in range(4)]
+    assert [tuple(c) for c in centre] == [tuple(lut[i]) for i in (0, 128, 255, 255)]
