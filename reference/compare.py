@@ -686,9 +686,9 @@ def _tracer_pooled(scene, seeds: int, first_seed: int) -> PooledTracer:
     m1 = m2 = 0.0
     s1 = s2 = 0.0
     spp = scene.film.strata ** 2
-    integ = Integrator(scene)
-    for k in range(seeds):
-        r = integ.render(moments=True, seed=(seed32(first_seed) + k) & 0xFFFFFFFF)
+    renders = Integrator(scene).render_seeds(
+        [(seed32(first_seed) + k) & 0xFFFFFFFF for k in range(seeds)], moments=True)
+    for r in renders:
         mean = r.image.astype(np.float64)
         m1 = m1 + mean / seeds
         m2 = m2 + (r.variance.astype(np.float64) * spp + mean ** 2) / seeds

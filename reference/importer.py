@@ -323,9 +323,7 @@ def render_imported(scene, seeds: int = 8):
 
     n = seeds if (scene.film.jitter or scene.samples_lights()) else 1
     rgb = var_y = 0.0
-    integ = Integrator(scene)
-    for k in range(n):
-        r = integ.render(moments=True, seed=k)
+    for r in Integrator(scene).render_seeds(range(n), moments=True):
         rgb = rgb + r.image.astype(np.float64) / n
         sd = np.sqrt(r.variance.astype(np.float64))
         var_y = var_y + (sd @ LUMINANCE) ** 2 / (n * n)

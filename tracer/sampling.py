@@ -60,14 +60,32 @@ def pixel_and_sample(idx, spp: int, first_pixel: int):
     return local_pixel + dr.opaque(jit.UInt32, first_pixel), idx - local_pixel * spp
 
 
-def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
+def pixel_seed_and_sample(idx, spp: int, seeds: int, first_pixel: int):
+    """(global pixel index, sample index within the pixel, seed index) of sample ``idx``
+    of a chunk that holds ``seeds`` x ``spp`` samples per pixel, seed after seed, from
+    pixel ``first_pixel`` (a render of several seeds at once, see
+    :meth:`tracer.integrator.Integrator.render_seeds`)."""
+    group = spp * seeds
+    local_pixel = idx // group
+    rest = idx - local_pixel * group
+    k = rest // spp
+    return local_pixel + dr.opaque(jit.UInt32, first_pixel), rest - k * spp, k
+
+
+def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int, seeds: int = 1):
     """(global pixel index, sample index within the pixel, film x, film y) for a range of pixels.
 
     Samples are ordered pixel by pixel, ``n * n`` consecutive samples per pixel,
-    so a per-pixel mean is a block reduction.
+    so a per-pixel mean is a block reduction. With ``seeds`` > 1 each pixel holds
+    that many such runs of samples at the same positions, and a fifth value is each
+    sample's seed index (:func:`pixel_seed_and_sample`).
     """
     spp = n * n
-    pixel, s = pixel_and_sample(dr.arange(jit.UInt32, pixel_count * spp), spp, first_pixel)
+    idx = dr.arange(jit.UInt32, pixel_count * spp * seeds)
+    if seeds == 1:
+        pixel, s = pixel_and_sample(idx, spp, first_pixel)
+    else:
+        pixel, s, k = pixel_seed_and_sample(idx, spp, seeds, first_pixel)
     px = pixel % width
     py = pixel // width
     sy = s // n
@@ -78,6 +96,8 @@ def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int):
     if faults.on("pixel-sample-corner"):
         film_x = jit.Float(px) + jit.Float(sx) * inv
         film_y = jit.Float(py) + jit.Float(sy) * inv
+    if seeds > 1:
+        return pixel, s, film_x, film_y, k
     return pixel, s, film_x, film_y
 
 
@@ -125,7 +145,8 @@ def jitter_2d(pixel, s, seed: int):
     return jit.Array2f(uniform(h1), uniform(h2))
 
 
-def light_sample(pixel, s, n: int, seed: int, depth, light: int, max_depth: int | None = None):
+def light_sample(pixel, s, n: int, seed, depth, light: int, max_depth: int | None = None,
+                 which=None):
     """The 2D sample of area light ``light`` for sample ``s`` of ``pixel`` at level ``depth``.
 
     One dimension of :func:`stratified_2d` per (seed, recursion level, light):
@@ -133,8 +154,18 @@ def light_sample(pixel, s, n: int, seed: int, depth, light: int, max_depth: int 
     render with another ``seed`` draws another set. Levels count from 1 (camera
     rays); lights are numbered in scene order among the emitting shapes.
     ``depth`` is an int, or a jit.UInt32 of levels (at most ``max_depth``, then
-    required) where the rays of one kernel sit at different levels.
+    required) where the rays of one kernel sit at different levels. ``seed`` may
+    be a sequence of seeds when ``which`` (a jit.UInt32) says which one each sample
+    uses: the sample is then the one a render with that seed alone draws.
     """
+    if which is not None:  # the same keys, looked up per lane by seed (and level)
+        if isinstance(depth, int):
+            keys, index = [mix32(seed32(sd), depth, light) for sd in seed], which
+        else:
+            rows = max_depth + 1
+            keys = [mix32(seed32(sd), k, light) for sd in seed for k in range(rows)]
+            index = which * rows + depth
+        return stratified_2d(pixel, s, n, dr.gather(jit.UInt32, jit.UInt32(keys), index))
     # A hash, not bit fields, so that any 32-bit seed works (seed32 maps other integers);
     # opaque, so that every level and light reuses one compiled kernel.
     if isinstance(depth, int):
