@@ -896,7 +896,7 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
                   "light samples): " + reason)
     full_image, deviation, model = tracer_image, None, None
     if scene is not full_scene:
-        full_image = Integrator(full_scene, seed=seed).render().image
+        full_image = shared_tracer_image(full_scene, seed)
         deviation = asdict(image_metrics(full_image, ref.image))
         reason += ("; tracer-only parts (" + ", ".join(full_scene.tracer_only) +
                    ") replaced by Mitsuba's equivalent for the check, their effect shown as "
