@@ -424,12 +424,6 @@ class Unit:
         return judge(self.test, metrics, tracer_image, self.ref)[0].checks
 
 
-def _tracer_image(scene):
-    from reference.compare import shared_tracer_image
-
-    return shared_tracer_image(scene)   # without a bug on: the comparison's render
-
-
 def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
     """The verdicts ``whitted compare`` gives ``scene``, each with its reference rendered once.
 
@@ -445,6 +439,7 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         comparable,
         regions_of,
         second_opinion_scene,
+        shared_tracer_image,
         ztest_passes,
     )
     from reference.deterministic import shares_light_samples
@@ -472,7 +467,7 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
                           ref, regions=regions_of(material_ids(small), list(small.materials))))
     for u in units:
         with faults.recording() as asked:
-            image = None if u.reference == "onelobe" else _tracer_image(u.scene)
+            image = None if u.reference == "onelobe" else shared_tracer_image(u.scene)
             checks = u.judge(image)
         u.reached = frozenset(asked)
         u.clean_margin, u.clean_check = margin(checks)
@@ -607,6 +602,8 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
 
 def _judge_mutant(m: Mutant, units: list[Unit]):
     """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not."""
+    from reference.compare import shared_tracer_image  # a new render with the bug on
+
     seen_by_any = False
     for u in units:
         if m.id not in u.reached:
@@ -616,7 +613,7 @@ def _judge_mutant(m: Mutant, units: list[Unit]):
         seen_by_any = True
         try:
             with faults.active(m.id):
-                image = None if u.reference == "onelobe" else _tracer_image(u.scene)
+                image = None if u.reference == "onelobe" else shared_tracer_image(u.scene)
                 checks = u.judge(image)
         except Exception as e:  # a bug that crashes the tracer is not a catch of the harness
             return f"error: {type(e).__name__}: {e}"

@@ -14,18 +14,20 @@ from tracer.scene import Scene
 
 INTEGRATORS = ("whitted", "direct", "path", "deterministic")
 
-def deterministic_image(scene: Scene, seed: int = 0, models: bool = False) -> np.ndarray:
+
+def deterministic_image(scene: Scene, seed: int = 0, models: bool = False,
+                        renderer=None) -> np.ndarray:
     """The deterministic reference's image (:mod:`reference.deterministic`; ``models``:
     the harness's own models of the scene's tracer-only parts), shared as
-    :mod:`reference.shared` says."""
+    :mod:`reference.shared` says. ``renderer``: the DeterministicReference of these
+    arguments to render it with, where the caller renders with it again."""
     from reference.deterministic import DeterministicReference
 
-    return reused(lambda: DeterministicReference(scene, seed, models=models).render().image,
-                  scene, *_deterministic_key(seed, models))
+    def make():
+        ref = renderer or DeterministicReference(scene, seed, models=models)
+        return ref.render().image
 
-
-def _deterministic_key(seed: int, models: bool) -> tuple:
-    return ("deterministic image", seed, models)
+    return reused(make, scene, "deterministic image", seed, models)
 
 
 @dataclass
@@ -85,7 +87,7 @@ def _render_reference(scene: Scene, integrator: str, seed: int, moments: bool, j
 
         ref = DeterministicReference(scene, seed)
         start = time.perf_counter()
-        image = reused(lambda: ref.render().image, scene, *_deterministic_key(seed, False))
+        image = deterministic_image(scene, seed, renderer=ref)
         first = time.perf_counter() - start
         warm = ref.render()  # kernels compiled: timed as the tracer is
         return ReferenceResult(image, warm.seconds, warm.spp, integrator, passes=1,

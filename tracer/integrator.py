@@ -143,9 +143,9 @@ class _Batch:
     first: int = 0  # the chunk's first pixel
     spp: int = 1
     tmax: object = None  # None: unbounded
-    #: in a render of several seeds (Integrator.render_seeds): the seeds, each pixel
-    #: holding spp samples of each in turn; empty in a render of one seed
-    seeds: tuple = ()
+    #: the render's seeds: one, or several (Integrator.render_seeds), each pixel then
+    #: holding spp samples of each in turn
+    seeds: tuple = (0,)
 
     FIELDS = ("o", "d", "weight", "slot", "state")
 
@@ -153,11 +153,12 @@ class _Batch:
         """(global pixel index, sample index within the pixel) of each ray's sample."""
         return pixel_and_sample(self.slot, self.spp, self.first)
 
-    def light_sample(self, n: int, seed: int, depth, light: int, max_depth: int):
-        """:func:`tracer.sampling.light_sample` of each ray's sample, with ``seed``, or in
-        a render of several seeds with the seed of the ray's sample."""
-        if not self.seeds:
-            return light_sample(*self.pixel_and_sample(), n, seed, depth, light, max_depth)
+    def light_sample(self, n: int, depth, light: int, max_depth: int):
+        """:func:`tracer.sampling.light_sample` of each ray's sample, with the seed of the
+        ray's sample."""
+        if len(self.seeds) == 1:
+            return light_sample(*self.pixel_and_sample(), n, self.seeds[0], depth, light,
+                                max_depth)
         pixel, s, k = pixel_seed_and_sample(self.slot, self.spp, len(self.seeds), self.first)
         return light_sample(pixel, s, n, self.seeds, depth, light, max_depth, which=k)
 
@@ -439,8 +440,8 @@ class Integrator:
                     for light in self.illuminating:
                         u = None
                         if not light.delta:
-                            u = b.light_sample(scene.film.strata, self.seed, depth,
-                                               light.index, scene.film.max_depth)
+                            u = b.light_sample(scene.film.strata, depth, light.index,
+                                               scene.film.max_depth)
                         wi, dist, e = light.sample(p, p_front, u)
                         cos = lights.lambert_cosine(nl, wi)
                         f = mats.eval(wi)
@@ -649,13 +650,8 @@ class Integrator:
         ``seed``: this render's seed, instead of the one the Integrator was made with (a
         caller that pools seeds builds the scene once).
         """
-        if seed is not None:
-            saved, self.seed = self.seed, seed32(seed)
-            try:
-                return self.render(progress, moments)
-            finally:
-                self.seed = saved
-        return self._render((), progress, moments)[0]
+        seed = self.seed if seed is None else seed32(seed)
+        return self._render((seed,), progress, moments)[0]
 
     def render_seeds(self, seeds, moments: bool = False,
                      progress: Callable[[int, int], None] | None = None) -> list[RenderResult]:
@@ -671,17 +667,17 @@ class Integrator:
         """
         seeds = tuple(seed32(sd) for sd in seeds)
         if len(seeds) <= 1 or self.scene.film.filter != "box":
-            return [self.render(progress, moments, seed=sd) for sd in seeds]
+            return [self._render((sd,), progress, moments)[0] for sd in seeds]
         return self._render(seeds, progress, moments)
 
     def _render(self, seeds: tuple, progress, moments: bool) -> list[RenderResult]:
-        """:meth:`render` (``seeds`` empty: the Integrator's seed) or
-        :meth:`render_seeds` (two seeds or more, box filter)."""
+        """:meth:`render` (one seed) or :meth:`render_seeds` (two or more, box filter):
+        a result per seed."""
         scene = self.scene
         W, H = scene.film.width, scene.film.height
         n = scene.film.strata
         spp = n * n
-        S = max(1, len(seeds))   # samples of S seeds per pixel, spp of each in turn
+        S = len(seeds)   # samples of S seeds per pixel, spp of each in turn
         max_depth = scene.film.max_depth
         total = W * H
         per_chunk = max(1, self.chunk_samples // (spp * S))
@@ -697,12 +693,12 @@ class Integrator:
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
             lanes = count * spp * S
-            if seeds:
+            if S > 1:
                 pixel, s, fx, fy, k = pixel_samples(W, n, first, count, S)
                 seed = dr.gather(jit.UInt32, jit.UInt32(list(seeds)), k)
             else:
                 pixel, s, fx, fy = pixel_samples(W, n, first, count)
-                seed = self.seed
+                seed = seeds[0]
             if scene.film.jitter:  # a uniform position inside each stratum
                 u = jitter_2d(pixel, s, seed)
                 fx, fy = fx + (u.x - 0.5) * (1.0 / n), fy + (u.y - 0.5) * (1.0 / n)
