@@ -84,15 +84,19 @@ def test_auto_takes_the_stack_where_rays_recurse():
 
 @pytest.mark.parametrize("schedule", ["stack", "wavefront"])
 @pytest.mark.parametrize("name,jitter", [("area_lights", False), ("emitter_in_glass", True),
+                                         ("emitter_in_glass", False),
                                          ("disk_triangle_lights", True), ("sky", False)])
 def test_seeds_rendered_together_are_the_renders_of_each_seed(name, jitter, schedule):
     """Integrator.render_seeds: every pixel holds the samples of each seed in turn, and
-    each sample reads its own seed's light samples (and jitter), so each image and
-    variance is, bit for bit, the one a render with that seed alone gives: each
-    sample's terms are summed in the same order (one chunk here; the wavefront's
-    splits of a level can reorder a sample's adds, to float32 rounding). A sample
-    reading the first seed's keys, or seeds in the wrong rows, makes images differ
-    by whole light samples."""
+    each sample reads its own seed's light samples (and jitter), or, on the stack
+    without jitter, each lane carries every seed through its one ray tree with a sum
+    of light per seed; either way each image and variance is, bit for bit, the one a
+    render with that seed alone gives: each seed's terms are summed in the same order
+    (one chunk here; the wavefront's splits of a level can reorder a sample's adds, to
+    float32 rounding). A sample reading the first seed's keys, a seed's light added to
+    another's sum, or seeds in the wrong rows, makes images differ by whole light
+    samples. Shared trees trace the rays of one render (emitter_in_glass: its point
+    light's shadow rays once, its sphere light's once per seed)."""
     import dataclasses
 
     scene = load_scene(resolve_scene(name)).with_overrides(size=(24, 18), spp=16)
@@ -105,3 +109,10 @@ def test_seeds_rendered_together_are_the_renders_of_each_seed(name, jitter, sche
         assert np.array_equal(r.image, alone.image)
         assert np.array_equal(r.variance, alone.variance)
     assert not np.array_equal(together[0].image, together[1].image)
+    shared = schedule == "stack" and not jitter
+    assert integ._shares_trees(tuple(seeds)) == shared
+    if shared:
+        assert together[0].rays_per_level == alone.rays_per_level
+        if name == "emitter_in_glass":   # the point light's shadow rays: once, not 3 times
+            assert sum(together[0].shadow_rays_per_level) < len(seeds) * sum(
+                alone.shadow_rays_per_level)

@@ -144,8 +144,10 @@ class _Batch:
     spp: int = 1
     tmax: object = None  # None: unbounded
     #: the render's seeds: one, or several (Integrator.render_seeds), each pixel then
-    #: holding spp samples of each in turn
+    #: holding spp samples of each in turn, or, with ``shared``, each lane carrying
+    #: every seed (its ray tree traced once, its light summed per seed)
     seeds: tuple = (0,)
+    shared: bool = False
 
     FIELDS = ("o", "d", "weight", "slot", "state")
 
@@ -162,12 +164,25 @@ class _Batch:
         pixel, s, k = pixel_seed_and_sample(self.slot, self.spp, len(self.seeds), self.first)
         return light_sample(pixel, s, n, self.seeds, depth, light, max_depth, which=k)
 
+    def light_samples(self, n: int, depth, light: int, max_depth: int) -> list:
+        """The light samples a ray's sample draws: one per seed where every lane carries
+        all of the render's seeds (``shared``), else the one of the lane's own seed."""
+        if not self.shared:
+            return [self.light_sample(n, depth, light, max_depth)]
+        pixel, s = self.pixel_and_sample()
+        return [light_sample(pixel, s, n, sd, depth, light, max_depth) for sd in self.seeds]
+
+    def sums(self) -> int:
+        """How many sums of light each lane keeps: one per seed with ``shared``, else one."""
+        return len(self.seeds) if self.shared else 1
+
     def size(self) -> int:
         return dr.width(self.slot)
 
     def like(self, fields: list) -> _Batch:
         """A batch of this chunk with other field values (in FIELDS order)."""
-        return _Batch(*fields, first=self.first, spp=self.spp, seeds=self.seeds)
+        return _Batch(*fields, first=self.first, spp=self.spp, seeds=self.seeds,
+                      shared=self.shared)
 
     def gather(self, index) -> _Batch:
         return self.like([None if getattr(self, f) is None else
@@ -330,7 +345,7 @@ class Integrator:
         that no level waits for it) holds the shadow rays cast in its high 32 bits
         and the rays whose weight is significant in its low 32 bits.
         """
-        contrib, shadow_masks, children = self._shade(b, depth)
+        (contrib,), shadow_masks, children = self._shade(b, depth)   # one seed a lane
         L.add(contrib, b.slot)
         # The level's statistics as one count per lane, summed without waiting for them:
         # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
@@ -358,10 +373,17 @@ class Integrator:
             total = (jit.UInt64(total) << 32) | n
         return (None if children is None else _compact(children)), total
 
-    def _shade(self, b: _Batch, depth, active=True, limit=None) -> tuple[object, list,
+    def _shade(self, b: _Batch, depth, active=True, limit=None) -> tuple[list, list,
                                                                          list | None]:
-        """The light a batch of rays finds, and the rays it spawns: (contrib, shadow masks,
-        children), children being (batch, keep) pairs or None.
+        """The light a batch of rays finds, and the rays it spawns: (contribs, shadow masks,
+        children), contribs a list of one light per seed a lane carries
+        (:meth:`_Batch.sums`), children being (batch, keep) pairs or None.
+
+        A lane that carries several seeds (``b.shared``) shades once and samples each
+        sampled light once per seed, adding each seed's light to its own sum; what no
+        seed changes (emission, point lights, backgrounds) is added to every sum. Each
+        sum is then, operation for operation, the light a render with that seed alone
+        adds.
 
         ``depth`` is the batch's level, an int (the wavefront: every ray at one level), or
         a jit.UInt32 per ray (:meth:`_render_stack`: rays at many levels in one kernel),
@@ -378,13 +400,15 @@ class Integrator:
         surf = geo.surface(hit, b.o, b.d)
         p, n, n_sh = surf.p, surf.n, surf.ns
         cos_o = -dr.dot(n, b.d)              # > 0: the ray arrives on the front side
-        contrib = dr.zeros(jit.Array3f, b.size())
+        S = b.sums()
+        contrib = [dr.zeros(jit.Array3f, b.size()) for _ in range(S)]
 
         if geo.emitters:
             le, seen = area.emitted(geo.radiance, hit.prim, cos_o, valid)
             if self.dfa is not None:  # the light is the path's L: ... E + L
                 seen &= self._accepts(self._step(b.state, "L"))
-            contrib += dr.select(seen, b.weight * le, 0)
+            term = dr.select(seen, b.weight * le, 0)
+            contrib = [c + term for c in contrib]
         if self.backgrounds:  # lights at infinity, seen by the rays that escape
             missed = ~valid
             if self.dfa is not None:
@@ -396,7 +420,8 @@ class Integrator:
                         gate = missed & (depth < max_depth)
                     elif depth >= max_depth:
                         continue
-                contrib += dr.select(gate, b.weight * light.background(b.d), 0)
+                term = dr.select(gate, b.weight * light.background(b.d), 0)
+                contrib = [c + term for c in contrib]
 
         children = None
         shadow_masks = []
@@ -409,7 +434,7 @@ class Integrator:
             # output costs more than it saves (emitter_in_glass 8 % slower, tir_prisms
             # 2.4x slower when later levels used it too), so there it runs unconditionally.
             def shade(valid):
-                add = dr.zeros(jit.Array3f, b.size())
+                add = [dr.zeros(jit.Array3f, b.size()) for _ in range(S)]
                 masks = []
                 kids = None
                 mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, valid)
@@ -435,13 +460,10 @@ class Integrator:
                     gate = mask
                     if self.dfa is not None:
                         gate = gate & self._accepts(self._steps(b.state, letters))
-                    add += dr.select(gate, b.weight * value, 0)
+                    term = dr.select(gate, b.weight * value, 0)
+                    add = [a + term for a in add]
                 if self.materials.has_smooth:
-                    for light in self.illuminating:
-                        u = None
-                        if not light.delta:
-                            u = b.light_sample(scene.film.strata, depth, light.index,
-                                               scene.film.max_depth)
+                    for light, u, k in self._light_samples(b, depth):
                         wi, dist, e = light.sample(p, p_front, u)
                         cos = lights.lambert_cosine(nl, wi)
                         f = mats.eval(wi)
@@ -457,7 +479,8 @@ class Integrator:
                         if faults.on("shadow-ray-past-light"):
                             tmax = dr.full(jit.Float, dr.inf, dr.width(p))
                         blocked = geo.occluded(origin, d_shadow, tmax, active)
-                        add += dr.select(active & ~blocked, b.weight * f * e * cos, 0)
+                        direct = dr.select(active & ~blocked, b.weight * f * e * cos, 0)
+                        add = [a + direct if j == k or k < 0 else a for j, a in enumerate(add)]
                         masks.append(active)
                 if self.materials.has_delta:
                     if per_ray:  # the rays of the last segment only where they can add light
@@ -466,13 +489,14 @@ class Integrator:
                             kids = [(c, keep & (depth + 1 < max_depth)) for c, keep in kids]
                     elif depth + 1 < max_depth or self.last_level_sees:
                         kids = self._delta(b, mats, si, off)
-                return add, tuple(masks), kids
+                return tuple(add), tuple(masks), kids
 
-            n_lights = len(self.illuminating) if self.materials.has_smooth else 0
+            n_rays = (sum(1 if light.delta else S for light in self.illuminating)
+                      if self.materials.has_smooth else 0)   # shadow rays a hit casts
 
             def unlit(m):  # the outputs of shade() where nothing is shaded
-                return (dr.zeros(jit.Array3f, m),
-                        tuple(dr.zeros(jit.Bool, m) for _ in range(n_lights)))
+                return (tuple(dr.zeros(jit.Array3f, m) for _ in range(S)),
+                        tuple(dr.zeros(jit.Bool, m) for _ in range(n_rays)))
 
             if per_ray:
                 # In the stack's loop the if pays even with child rays: a SIMD packet whose
@@ -506,12 +530,29 @@ class Integrator:
                                         lambda v: unlit(b.size()))
             else:
                 add, masks, children = shade(valid)
-            contrib += add
+            contrib = [c + a for c, a in zip(contrib, add, strict=True)]
             shadow_masks = list(masks)
         return contrib, shadow_masks, children
 
+    def _light_samples(self, b: _Batch, depth):
+        """(light, sample, which sum) for each shadow ray a hit casts, in the lights'
+        order: a light no seed changes (a delta light) once, with which = -1 (its light
+        goes to every sum); a sampled light once per seed the lane carries, with that
+        seed's sample and sum (-1 where the lane carries one)."""
+        film = self.scene.film
+        for light in self.illuminating:
+            if light.delta:
+                yield light, None, -1
+                continue
+            us = b.light_samples(film.strata, depth, light.index, film.max_depth)
+            if len(us) == 1:
+                yield light, us[0], -1
+            else:
+                yield from ((light, u, k) for k, u in enumerate(us))
+
     def _render_stack(self, b: _Batch) -> tuple[object, object]:
-        """A chunk's radiance per sample and its counts, every level in one kernel.
+        """A chunk's radiance per sample (a tuple: one per seed a lane carries) and its
+        counts, every level in one kernel.
 
         Each lane follows its sample's ray tree depth first: a loop traces and shades
         one ray a pass (:meth:`_shade`, the wavefront's shading), goes on with the first
@@ -548,14 +589,15 @@ class Integrator:
         loop_state = (dr.full(jit.Bool, True, n), dr.zeros(jit.UInt32, n),
                       dr.full(jit.UInt32, 1, n), jit.Float(b.tmax), jit.Array3f(b.o),
                       jit.Array3f(b.d), jit.Array3f(b.weight), jit.UInt32(state0),
-                      dr.zeros(jit.Array3f, n), pend_f, pend_u, counts)
+                      tuple(dr.zeros(jit.Array3f, n) for _ in range(b.sums())), pend_f, pend_u,
+                      counts)
         one, zero = jit.UInt32(1), jit.UInt32(0)
 
         def body(alive, sp, depth, tmax, o, d, w, st, L, pend_f, pend_u, counts):
             cur = b.like([o, d, w, b.slot, st if dfa else None])
             cur.tmax = tmax
             contrib, masks, kids = self._shade(cur, depth, alive, limit)
-            L = L + dr.select(alive, contrib, 0)
+            L = tuple(x + dr.select(alive, c, 0) for x, c in zip(L, contrib, strict=True))
             base = (depth - 1) * 3
             sig = dr.select(dr.max(w) > SIGNIFICANT_WEIGHT, one, zero)
             shadows = zero
@@ -605,7 +647,7 @@ class Integrator:
         for j in range(3 * levels):
             dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * stride + packet,
                               mode=dr.ReduceMode.Local)
-        dr.eval(L, total)
+        dr.eval(*L, total)
         return L, dr.block_sum(jit.UInt64(total), packets)
 
     def _delta(self, b: _Batch, mats, si: ShadingPoint, off) -> list:
@@ -664,11 +706,24 @@ class Integrator:
         read-back overhead beside its kernel. Each result's ray counts and seconds
         are those of all seeds together. A gaussian-filtered film renders seed by
         seed (its splat takes one seed's samples).
+
+        Where a seed changes nothing but the light samples (no jitter, no light-path
+        expression) and the recursion runs on the stack, the seeds share their ray
+        trees: each lane traces its sample's tree once and keeps one sum of light per
+        seed, sampling each sampled light once per seed (:meth:`_shade`). The seeds'
+        trees are the same ray for ray, so each image is still, bit for bit, that
+        seed's own render (``tests/test_schedules.py``), and the counts are the rays
+        actually traced.
         """
         seeds = tuple(seed32(sd) for sd in seeds)
         if len(seeds) <= 1 or self.scene.film.filter != "box":
             return [self._render((sd,), progress, moments)[0] for sd in seeds]
         return self._render(seeds, progress, moments)
+
+    def _shares_trees(self, seeds: tuple) -> bool:
+        """Whether :meth:`render_seeds` traces each ray tree once for all ``seeds``."""
+        return (len(seeds) > 1 and self.schedule == "stack" and not self.scene.film.jitter
+                and self.dfa is None)
 
     def _render(self, seeds: tuple, progress, moments: bool) -> list[RenderResult]:
         """:meth:`render` (one seed) or :meth:`render_seeds` (two or more, box filter):
@@ -678,6 +733,7 @@ class Integrator:
         n = scene.film.strata
         spp = n * n
         S = len(seeds)   # samples of S seeds per pixel, spp of each in turn
+        shared = self._shares_trees(seeds)   # or spp samples, each carrying the S seeds
         max_depth = scene.film.max_depth
         total = W * H
         per_chunk = max(1, self.chunk_samples // (spp * S))
@@ -692,8 +748,8 @@ class Integrator:
         start = time.perf_counter()
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
-            lanes = count * spp * S
-            if S > 1:
+            lanes = count * spp * (1 if shared else S)
+            if S > 1 and not shared:
                 pixel, s, fx, fy, k = pixel_samples(W, n, first, count, S)
                 seed = dr.gather(jit.UInt32, jit.UInt32(list(seeds)), k)
             else:
@@ -709,9 +765,10 @@ class Integrator:
             state = None
             if self.dfa is not None:  # every path ends at the eye: read E first
                 state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), lanes)
-            camera = _Batch(o, d, ones, slot, state, first, spp, tmax, seeds)
+            camera = _Batch(o, d, ones, slot, state, first, spp, tmax, seeds, shared)
             if self.schedule == "stack":
-                radiance.value, sums = self._render_stack(camera)
+                sums_of_light, sums = self._render_stack(camera)
+                radiance.value = sums_of_light if shared else sums_of_light[0]
                 counts.append(sums)
             else:
                 stack = [(1, camera)]
@@ -725,6 +782,17 @@ class Integrator:
                             stack.append((depth + 1, part))
             if splat is not None:
                 splat.add(radiance.value, fx, fy, first, count, spp)
+            elif shared:   # a sum per seed: each seed's rows of the chunk
+                rows = slice(first * S, (first + count) * S)
+                for out, sq in ((image, False), (second, True)):
+                    if out is None:
+                        continue
+                    means = [dr.block_sum(L * L if sq else L, spp) * (1.0 / spp)
+                             for L in radiance.value]
+                    dr.eval(means)
+                    view = out[rows].reshape(count, S, 3)
+                    for k, m in enumerate(means):
+                        view[:, k] = m.numpy().T
             else:
                 # rows: pixel by pixel, and in a pixel seed by seed
                 L = radiance.value
