@@ -1386,6 +1386,9 @@ def entrypoint() -> None:
     steps against /usr/bin/time). So the streams are flushed and the process
     leaves with os._exit; should a flush fail, Python's own exit reports it.
     """
+    from reference.malloc import keep_freed_memory
+
+    keep_freed_memory()
     rc = main()
     try:
         sys.stdout.flush()

@@ -88,18 +88,13 @@ class LuxResult:
     seconds: float
 
 
-def pixels_of(film: np.ndarray, desc: Description) -> np.ndarray:
-    """H x W x k x k x 3: each pixel's sub-pixels (k = desc.subsamples)."""
-    k, h, w = desc.subsamples, desc.height, desc.width
-    return film.reshape(h, k, w, k, 3).transpose(0, 2, 1, 3, 4)
-
-
 def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: int,
                pass_timeout: float) -> None:
     arrays = {"props": np.array(desc.text()),
               "config": np.array(props_text(config_props(desc, 0, spp_per_pass)).replace(
                   'renderengine.seed = 1\n', "renderengine.seed = @SEED@\n")),
               "film": np.array(desc.film_size), "seeds": np.array(seeds, dtype=np.int64),
+              "subsamples": np.array(desc.subsamples),
               "pass_timeout": np.array(pass_timeout),
               "mesh_names": np.array(list(desc.meshes))}
     for i, (v, f, n) in enumerate(desc.meshes.values()):
@@ -126,10 +121,11 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
 
 def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
                spp_per_pass: int = SPP_PER_PASS, timeout: float | None = None,
-               subsamples: int = SUBSAMPLES) -> LuxJob:
+               subsamples: int = SUBSAMPLES, nice: int = 0) -> LuxJob:
     """:func:`render_many` started: the child renders while the caller goes on, and
-    :meth:`LuxJob.results` waits for it (``whitted report`` runs its formula-bug sweep
-    meanwhile). A scene that does not convert is refused here, before the child starts."""
+    :meth:`LuxJob.results` waits for it (``whitted report`` runs its comparisons and its
+    formula-bug sweep meanwhile). A scene that does not convert is refused here, before
+    the child starts. ``nice``: the child's priority lowered by that much (0-19)."""
     require()
     descs = [describe(s, subsamples=subsamples) for s in scenes]  # refuse before starting
     seeds = [seed * 1000 + k for k in range(passes)]
@@ -147,6 +143,7 @@ def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
         # caller works and which would stop the child when full
         log = open(tmp / "child.log", "w+")
         proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
+                                 *(["--nice", str(nice)] if nice else []),
                                  *map(str, jobs)], stdout=subprocess.DEVNULL,
                                 stderr=log, text=True, env=dict(os.environ),
                                 cwd=str(Path(__file__).resolve().parent.parent))
@@ -201,11 +198,15 @@ class LuxJob:
             results = []
             for d, job in zip(self.descs, self.jobs, strict=True):
                 with np.load(str(job)[:-4] + ".out.npz") as out:
-                    films = out["passes"]
-                results.append(_result(d, films, self.spp_per_pass, seconds / len(self.descs)))
+                    sums, squares = out["sums"], out["squares"]
+                results.append(_result(d, sums, squares, self.spp_per_pass,
+                                       seconds / len(self.descs)))
             return results
         finally:
             self.close()
+
+    def running(self) -> bool:
+        return self.proc.poll() is None
 
     def close(self) -> None:
         """Stop the child if it still runs, and remove its files."""
@@ -216,16 +217,60 @@ class LuxJob:
         shutil.rmtree(self.tmp, ignore_errors=True)
 
 
-def _result(desc: Description, films: np.ndarray, spp_per_pass: int,
+class SharedCores:
+    """Dr.Jit on one thread while a LuxCore child renders beside this process.
+
+    After each kernel, Dr.Jit's second thread (nanothread's worker) asks for work up to
+    500,000 times before it sleeps: about 25 ms of a core here (a throwaway script:
+    0.02-0.03 s of CPU time in a 0.5 s sleep after a render), taken from LuxCore's
+    threads while this process traces its next kernel or judges an image. On one thread
+    no core spins, and a kernel's work costs less CPU time (0.90 s against 0.95 s for
+    five renders of whitted_mix, the same script). :meth:`poll`, called between pieces
+    of work, gives Dr.Jit its threads back as soon as the child has exited; leaving the
+    ``with`` block gives them back in any case.
+    """
+
+    def __init__(self, job: LuxJob | None):
+        self.job = job
+        self.threads = None      # Dr.Jit's thread count to give back, while it is taken
+
+    def __enter__(self) -> SharedCores:
+        import drjit as dr
+
+        n = dr.thread_count()
+        if self.job is not None and self.job.running() and n > 1:
+            self.threads = n
+            dr.set_thread_count(1)
+        return self
+
+    def poll(self) -> None:
+        if self.threads is not None and not self.job.running():
+            self._give_back()
+
+    def _give_back(self) -> None:
+        import drjit as dr
+
+        dr.set_thread_count(self.threads)
+        self.threads = None
+
+    def __exit__(self, *exc) -> None:
+        if self.threads is not None:
+            self._give_back()
+
+
+def _result(desc: Description, sums: np.ndarray, squares: np.ndarray, spp_per_pass: int,
             seconds: float) -> LuxResult:
-    subs = np.stack([pixels_of(f.astype(np.float64), desc) for f in films])  # P H W k k 3
-    p = len(subs)
-    n = p * desc.subsamples ** 2 * spp_per_pass
-    mean = subs.mean(axis=(0, 3, 4))
-    m2 = (subs ** 2).mean(axis=(0, 3, 4))
+    """The image, its variance and the passes' spread, from the child's sums over each
+    pixel's k x k film pixels (reference.luxcore_runner.pass_moments): ``sums`` P x H x W x 3
+    per pass, ``squares`` H x W x 3 over all passes."""
+    k = desc.subsamples
+    p = len(sums)
+    n = p * k * k * spp_per_pass
+    mean = sums.sum(0) / (p * k * k)
+    m2 = squares / (p * k * k)
     var = np.maximum(m2 - mean ** 2, 0) / n
-    sums = subs.mean(axis=(3, 4)).sum(-1)            # P x H x W: each pass's channel sum
-    pass_var = sums.var(0, ddof=1) / p if p > 1 else None
+    means = sums.sum(-1) / (k * k)                           # P x H x W: each pass's channel sum
+    pass_var = means.var(0, ddof=1) / p if p > 1 else None
     return LuxResult(mean.astype(np.float32), var.astype(np.float32), pass_var, p, n, seconds)
 
 

@@ -319,12 +319,13 @@ class Started:
             self.job.close()
 
 
-def start_three(scenes: list, quick: bool = False) -> Started:
-    """Convert the scenes and start LuxCore on those it can compare (one child process).
+def start_three(scenes: list, quick: bool = False, nice: int = 0) -> Started:
+    """Convert the scenes and start LuxCore on those it can compare (one child process,
+    its priority lowered by ``nice``).
 
     :func:`compare_three` finishes the work; in between the caller may go on (``whitted
-    report`` runs the formula-bug sweep while LuxCore renders). A scene that does not
-    convert gets its one-line reason.
+    report`` runs its comparisons and the formula-bug sweep while LuxCore renders). A
+    scene that does not convert gets its one-line reason.
     """
     from reference import luxcore
     from reference.compare import comparable
@@ -342,7 +343,8 @@ def start_three(scenes: list, quick: bool = False) -> Started:
                 reason = str(e)
         why.append(reason)
     todo = [s for s, w in zip(small, why, strict=True) if w is None]
-    return Started(list(scenes), small, why, luxcore.start_many(todo) if todo else None)
+    return Started(list(scenes), small, why,
+                   luxcore.start_many(todo, nice=nice) if todo else None)
 
 
 def compare_three(scenes: list, progress=None, quick: bool = False,

@@ -555,8 +555,12 @@ class SweepResult:
 
 
 def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: bool = True,
-          log: Callable[[str], None] = print) -> SweepResult:
-    """Judge the tracer as written and with each bug on every scene (module docstring)."""
+          log: Callable[[str], None] = print,
+          between: Callable[[], None] | None = None) -> SweepResult:
+    """Judge the tracer as written and with each bug on every scene (module docstring).
+
+    ``between()``, when given, is called before each scene and each bug's judgement
+    (``whitted report``: reference.luxcore.SharedCores.poll)."""
     from tracer import load_scene
 
     start = time.perf_counter()
@@ -567,12 +571,16 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     scenes = [sweep_size(load_scene(p), quick) for p in scene_paths]  # validated first
     for i, scene in enumerate(scenes, 1):
         t0 = time.perf_counter()
+        if between is not None:
+            between()
         units = scene_units(scene)
         clean = all(u.clean_passed for u in units)
         reached = frozenset().union(*(u.reached for u in units))
         todo = [m for m in mutants if m.id in reached]
         for m in todo:
             r = results[m.id]
+            if between is not None:
+                between()
             t1 = time.perf_counter()
             outcome = _judge_mutant(m, units)
             r.seconds += time.perf_counter() - t1

@@ -129,6 +129,13 @@ def quick_overrides(scene):
     return scene.with_overrides(size=(w, h), spp=min(scene.film.spp, QUICK_SPP))
 
 
+#: The LuxCore child's priority, lowered to the least (``nice`` 19): it starts before the
+#: comparisons and renders in what they leave of the two cores (while one thread judges an
+#: image, writes files or traces a kernel), and gets little of a core that the comparisons'
+#: timed renders use.
+LUXCORE_NICE = 19
+
+
 def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = False,
                  log=print, fresnel: bool = True, reference: str = "deterministic",
                  second_opinion: bool | None = None, mutants: bool = False,
@@ -141,9 +148,9 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
 
     ``luxcore``: also the three-way verdict of each scene with LuxCore
     (:mod:`reference.luxcore_compare`, one LuxCore child process for all scenes). The
-    child starts when the comparisons are done (their timings stay free of it) and
-    renders while the Fresnel curves and the sweep run; the imported scenes, timed too,
-    come after it.
+    child starts first, at the lowest priority (:data:`LUXCORE_NICE`), and renders while
+    the comparisons, the Fresnel curves and the sweep run; the imported scenes, timed
+    too, come after it.
     It does not change whether the report passes: that stays the tracer's verdict
     against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
     tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
@@ -158,8 +165,6 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
 
 def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_opinion,
                   mutants, luxcore, imported) -> Report:
-    from reference.compare import compare_scene
-    from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
     from tracer import load_scene
 
     start = time.perf_counter()
@@ -171,54 +176,23 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
                     date=_dt.datetime.now().astimezone().isoformat(timespec="seconds"),
                     quick=quick)
     total = len(scenes) + (1 if fresnel else 0)
-    for i, scene in enumerate(scenes, 1):
-        if quick:
-            scene = quick_overrides(scene)
-        t0 = time.perf_counter()
-        result, tracer_img, ref_img = compare_scene(scene, work / scene.name, reference,
-                                                    second_opinion=second_opinion)
-        entry = scene_entry(result)
-        entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
-        entry["viewer"] = _scene_viewer(tracer_img, ref_img)
-        if scene.has_specular() or scene.samples_lights():
-            entry["light_paths"], entry["images"]["light_paths"] = light_paths(scene)
-        report.scenes.append(entry)
-        report.passed &= result.passed
-        test = result.test + (" + z-test" if result.second_opinion else "")
-        log(f"[{i}/{total}] {scene.name:<20} {test:<22} "
-            f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
     started = None
     if luxcore:
         from reference.luxcore_compare import compare_three, start_three
 
         t_lux = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
-        started = start_three(sized, quick=quick)
+        started = start_three(sized, quick=quick, nice=LUXCORE_NICE)
         log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while the "
             "report goes on")
     try:
-        if fresnel:
-            t0 = time.perf_counter()
-            params = QUICK_FRESNEL if quick else FULL_FRESNEL
-            table = fresnel_table(DEFAULT_IORS, params["step"], params["samples"])
-            plot(table, out / "fresnel.png")
-            report.fresnel = table.summary
-            report.fresnel_passed = table.passed
-            report.passed &= table.passed
-            log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
-                f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
-        if mutants:
-            from reference import mutants as mutant_sweep
+        from reference.luxcore import SharedCores
 
-            t0 = time.perf_counter()
-            log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
-                f"({'quick' if quick else 'full'} sizes)")
-            sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m))
-            report.mutants = sweep.to_json()
-            report.passed &= sweep.passed
-            log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
-                f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
-                f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+        _compare_scenes(report, scenes, work, quick, log, reference, second_opinion, total)
+        # Dr.Jit on one thread while LuxCore's child renders beside the untimed sweep
+        with SharedCores(None if started is None else started.job) as cores:
+            _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, total,
+                               cores.poll)
     except BaseException:
         if started is not None:
             started.close()
@@ -252,6 +226,59 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
     (out / "report.md").write_text(markdown(report))
     (out / "index.html").write_text(html_page(report, out))
     return report
+
+
+def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
+                    total) -> None:
+    """Each scene's comparison with Mitsuba, its images and light paths, into ``report``."""
+    from reference.compare import compare_scene
+
+    for i, scene in enumerate(scenes, 1):
+        if quick:
+            scene = quick_overrides(scene)
+        t0 = time.perf_counter()
+        result, tracer_img, ref_img = compare_scene(scene, work / scene.name, reference,
+                                                    second_opinion=second_opinion)
+        entry = scene_entry(result)
+        entry["images"] = _scene_images(work / scene.name, tracer_img, ref_img)
+        entry["viewer"] = _scene_viewer(tracer_img, ref_img)
+        if scene.has_specular() or scene.samples_lights():
+            entry["light_paths"], entry["images"]["light_paths"] = light_paths(scene)
+        report.scenes.append(entry)
+        report.passed &= result.passed
+        test = result.test + (" + z-test" if result.second_opinion else "")
+        log(f"[{i}/{total}] {scene.name:<20} {test:<22} "
+            f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+
+def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, total,
+                       between) -> None:
+    """The report's Fresnel curves and formula-bug sweep, while LuxCore's child renders;
+    ``between()`` is called between pieces of the sweep's work."""
+    from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
+
+    if fresnel:
+        t0 = time.perf_counter()
+        params = QUICK_FRESNEL if quick else FULL_FRESNEL
+        table = fresnel_table(DEFAULT_IORS, params["step"], params["samples"])
+        plot(table, out / "fresnel.png")
+        report.fresnel = table.summary
+        report.fresnel_passed = table.passed
+        report.passed &= table.passed
+        log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
+            f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+    if mutants:
+        from reference import mutants as mutant_sweep
+
+        t0 = time.perf_counter()
+        log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
+            f"({'quick' if quick else 'full'} sizes)")
+        sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m),
+                                     between=between)
+        report.mutants = sweep.to_json()
+        report.passed &= sweep.passed
+        log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
+            f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
+            f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
 
 
 #: Heckbert's expressions that partition a Whitted tracer's paths.

@@ -104,6 +104,66 @@ def test_tessellated_sphere_stays_within_its_chord_bound():
 # ------------------------------------------------------------------ rendering
 
 
+def test_passes_become_pixel_means_with_their_noise():
+    """A pixel is the mean of its k x k sub-pixels over the passes; its variance the
+    per-sample second moment over those P k^2 samples / (P k^2); the spread of the
+    passes' channel sums / P. Checked pixel by pixel against those definitions, on
+    films whose sub-pixels all differ (a wrong grouping of rows or columns fails)."""
+    from types import SimpleNamespace
+
+    from reference.luxcore import _result
+    from reference.luxcore_runner import pass_moments
+
+    k, h, w, p = 3, 4, 5, 3
+    rng = np.random.default_rng(7)
+    films = rng.random((p, h * k, w * k, 3)).astype(np.float32)
+    moments = [pass_moments(f, k) for f in films]          # as the child sums each pass
+    sums = np.stack([m[0] for m in moments])
+    squares = sum(m[1] for m in moments)
+    r = _result(SimpleNamespace(subsamples=k, height=h, width=w), sums, squares, 1, 0.0)
+    for y in range(h):
+        for x in range(w):
+            sub = films[:, y * k:(y + 1) * k, x * k:(x + 1) * k].astype(np.float64)
+            samples = sub.reshape(-1, 3)
+            assert np.allclose(r.image[y, x], samples.mean(0), rtol=1e-6)
+            assert np.allclose(r.variance[y, x], samples.var(0) / len(samples), rtol=1e-5)
+            passes = sub.mean(axis=(1, 2)).sum(-1)
+            assert np.isclose(r.pass_variance[y, x], passes.var(ddof=1) / p, rtol=1e-9)
+    assert r.samples == p * k * k
+
+
+def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
+    import drjit as dr
+
+    from reference.luxcore import SharedCores
+
+    class Job:
+        alive = True
+
+        def running(self):
+            return self.alive
+
+    before = dr.thread_count()
+    if before < 2:
+        pytest.skip("Dr.Jit has one thread here: nothing to share")
+    job = Job()
+    with SharedCores(job) as cores:
+        assert dr.thread_count() == 1
+        cores.poll()
+        assert dr.thread_count() == 1          # the child still renders
+        job.alive = False
+        cores.poll()
+        assert dr.thread_count() == before     # given back as soon as the child is gone
+    assert dr.thread_count() == before
+    job.alive = True
+    with pytest.raises(KeyError):
+        with SharedCores(job):
+            raise KeyError("a failing sweep")
+    assert dr.thread_count() == before         # given back on the way out, too
+    with SharedCores(None):
+        assert dr.thread_count() == before     # no child: nothing given up
+
+
 def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
     from reference import cli
     from reference import luxcore as lx
