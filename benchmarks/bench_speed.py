@@ -12,7 +12,7 @@ process whose kernels are cached, the everyday case.
                                                 [--schedule auto|wavefront|stack]
     python benchmarks/bench_speed.py quality    [--size 200x150] [--rel-rmse 0.02] [SCENE ...]
     python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
-    python benchmarks/bench_speed.py report     [--quick]
+    python benchmarks/bench_speed.py report     [--quick] [--against COMMIT [--rounds 2]]
     python benchmarks/bench_speed.py all        (all of them at their defaults, but memory
                                                  at 16 spp: 256 spp takes about 15 minutes
                                                  on a 2-core CPU)
@@ -409,21 +409,54 @@ def cmd_memory(args) -> int:
 # ------------------------------------------------------------------ 6. whitted report
 
 
+def _time_report(root: Path, quick: bool) -> tuple[float, int, int]:
+    """One full `whitted report` of the checkout at ``root``, run as ``python -m
+    reference.cli`` with this environment's Python: (seconds, exit status, peak bytes)."""
+    with tempfile.TemporaryDirectory() as tmp:
+        cmd = [sys.executable, "-m", "reference.cli", "report", "-o", tmp]
+        cmd += ["--quick"] if quick else []
+        env = dict(os.environ, PYTHONPATH=str(root))
+        t0 = time.perf_counter()
+        proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=subprocess.DEVNULL,
+                                stderr=subprocess.DEVNULL)
+        _, status, usage = os.wait4(proc.pid, 0)
+        secs = time.perf_counter() - t0
+    return secs, os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024
+
+
 def cmd_report(args) -> int:
     rev = commit()
     what = "--quick" if args.quick else "full"
     print(f"whitted report ({what}) at commit {rev}; {machine_note()}", flush=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        cmd = [BIN / "whitted", "report", "-o", tmp] + (["--quick"] if args.quick else [])
-        t0 = time.perf_counter()
-        proc = subprocess.Popen([str(c) for c in cmd], stdout=subprocess.DEVNULL,
-                                stderr=subprocess.DEVNULL)
-        _, status, usage = os.wait4(proc.pid, 0)
-        secs = time.perf_counter() - t0
-    rc = os.waitstatus_to_exitcode(status)
-    print(f"  {secs:.0f} s ({secs / 60:.1f} min), exit status {rc}, "
-          f"peak {mb(usage.ru_maxrss * 1024)}")
-    print("  target: half of the time measured at the baseline commit on the same machine")
+    if not args.against:
+        secs, rc, peak = _time_report(ROOT, args.quick)
+        print(f"  {secs:.0f} s ({secs / 60:.1f} min), exit status {rc}, peak {mb(peak)}")
+        print("  target: half of the time measured at the baseline commit on the same "
+              "machine (--against COMMIT measures both)")
+        return 0
+    # The baseline's report in a git worktree of it, run with this environment's packages,
+    # alternating with this checkout's, so that both see the same drift of the machine.
+    wt = Path(tempfile.mkdtemp(prefix="whitted-baseline-")) / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
+                    args.against], check=True, capture_output=True)
+    try:
+        times: dict[str, list[float]] = {"baseline": [], "this": []}
+        for k in range(args.rounds):
+            for name, root in (("baseline", wt), ("this", ROOT)):
+                secs, rc, peak = _time_report(root, args.quick)
+                times[name].append(secs)
+                label = args.against if name == "baseline" else rev
+                print(f"  round {k + 1}: {label:<12} {secs:6.1f} s, exit status {rc}, "
+                      f"peak {mb(peak)}", flush=True)
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
+                       capture_output=True)
+        shutil.rmtree(wt.parent, ignore_errors=True)
+    ratios = [b / t for b, t in zip(times["baseline"], times["this"], strict=True)]
+    print(f"  {args.against}'s time over this checkout's, round by round: "
+          + ", ".join(f"{r:.2f}x" for r in ratios))
+    print(f"  target >= 2x faster than {args.against}: {verdict(min(ratios) >= 2)} "
+          "(in every round)")
     return 0
 
 
@@ -474,6 +507,12 @@ def main(argv=None) -> int:
 
     rp = sub.add_parser("report", help="time `whitted report`")
     rp.add_argument("--quick", action="store_true")
+    rp.add_argument("--against", metavar="COMMIT",
+                    help="also time COMMIT's report (a git worktree of it, run with this "
+                         "environment), alternating with this checkout's, and print the "
+                         "ratios (the target's baseline: 8535128)")
+    rp.add_argument("--rounds", type=lambda v: max(1, int(v)), default=2,
+                    help="rounds of the two reports with --against (default 2)")
 
     sub.add_parser("all", help="every subcommand at its defaults (memory at 16 spp)")
     args = p.parse_args(argv)
