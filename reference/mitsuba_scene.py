@@ -314,7 +314,20 @@ def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False,
 
     ``models``: tracer-only parts as the harness models them, where it has a model
     (:func:`reference.materials.tracer_only_model`)."""
-    return mi.load_dict(to_dict(scene_tree(scene, integrator, moments, jitter, models), mi))
+    tree = to_dict(scene_tree(scene, integrator, moments, jitter, models), mi)
+    import drjit as dr
+
+    threads = dr.thread_count()
+    if threads >= 2:
+        return mi.load_dict(tree)
+    # Mitsuba 3.9.1's parser never returns from reading an EXR file (scenes/envmap.toml's
+    # map) on a Dr.Jit pool of one thread, which reference.luxcore.SharedCores leaves
+    # during the report's sweep (and a one-core machine by default): two for the load.
+    dr.set_thread_count(2)
+    try:
+        return mi.load_dict(tree)
+    finally:
+        dr.set_thread_count(threads)
 
 
 # ------------------------------------------------------------------ XML

@@ -164,6 +164,32 @@ def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
         assert dr.thread_count() == before     # no child: nothing given up
 
 
+def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
+    """SharedCores leaves Dr.Jit one thread during the report's sweep, and Mitsuba
+    3.9.1's parser never returns from reading an EXR map on a pool of one thread:
+    reference.mitsuba_scene.load gives the pool two threads for the load. Run in a
+    child with a time limit, as the bug is a hang (without the two threads: killed)."""
+    import subprocess
+    import sys
+
+    code = ("import tracer, drjit as dr\n"
+            "from tracer import load_scene\n"
+            "from reference import mitsuba\n"
+            "from reference.mitsuba_scene import load\n"
+            f"scene = load_scene({str(SCENES / 'envmap.toml')!r})\n"
+            "dr.set_thread_count(1)\n"
+            "load(scene, mitsuba())\n"
+            "assert dr.thread_count() == 1\n"
+            "print('loaded')\n")
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=60, cwd=Path(__file__).resolve().parent.parent)
+    except subprocess.TimeoutExpired:
+        pytest.fail("Mitsuba's load of an EXR map hung with Dr.Jit on one thread")
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "loaded" in out.stdout
+
+
 def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
     from reference import cli
     from reference import luxcore as lx
