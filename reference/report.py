@@ -250,6 +250,7 @@ def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
         log(f"[{i}/{total}] {scene.name:<20} {test:<22} "
             f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
 
+
 def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, total,
                        between) -> None:
     """The report's Fresnel curves and formula-bug sweep, while LuxCore's child renders;
@@ -273,7 +274,7 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
         log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
             f"({'quick' if quick else 'full'} sizes)")
         sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m),
-                                     between=between)
+                                   between=between)
         report.mutants = sweep.to_json()
         report.passed &= sweep.passed
         log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
