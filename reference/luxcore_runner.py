@@ -2,8 +2,9 @@
 
 LuxCore's allocator and thread pool never share a process with Dr.Jit:
 :mod:`reference.luxcore` writes each job (the scene description of
-:mod:`reference.luxcore_scene`, its meshes and the passes' seeds) to an
-``.npz`` file and starts this module on the list of jobs; each job's passes
+:mod:`reference.luxcore_scene` and the passes' seeds) to an ``.npz`` file, its
+meshes to binary PLY files beside it that LuxCore reads itself, and starts
+this module on the list of jobs; each job's passes
 come back in ``<job>.out.npz``, summed over each image pixel's k x k film pixels
 (:func:`pass_moments`): ``sums`` (P x H x W x 3, each pass's sums) and ``squares``
 (H x W x 3, the sums of squares over every pass), in float64.
@@ -25,17 +26,6 @@ import time
 import numpy as np  # before pyluxcore, always
 
 
-def _rows(a: np.ndarray, dtype) -> list[tuple]:
-    """An array's rows as tuples of Python numbers (DefineMesh takes no ndarray); through
-    tolist, 0.11 s against 0.18 s for a tessellated sphere of 98,491 triangles."""
-    return list(map(tuple, np.asarray(a, dtype).tolist()))
-
-
-def _mesh(scene, name: str, v: np.ndarray, f: np.ndarray, n: np.ndarray | None) -> None:
-    scene.DefineMesh(name, _rows(v, np.float32), _rows(f, np.int64),
-                     None if n is None else _rows(n, np.float32), None, None, None)
-
-
 def pass_moments(film: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
     """A film of kH x kW pixels as the sums and the sums of squares (H x W x 3, float64)
     of each image pixel's k x k film pixels, read in place (rows as H x k x W x k)."""
@@ -46,11 +36,7 @@ def pass_moments(film: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def run_job(pyluxcore, path: str) -> None:
     job = np.load(path, allow_pickle=False)
-    scene = pyluxcore.Scene()
-    names = [str(x) for x in job["mesh_names"]]
-    for i, name in enumerate(names):
-        n = job[f"n_{i}"] if f"n_{i}" in job.files else None
-        _mesh(scene, name, job[f"v_{i}"], job[f"f_{i}"], n)
+    scene = pyluxcore.Scene()   # its meshes: PLY files that LuxCore reads (scene.shapes.*)
     props = pyluxcore.Properties()
     props.SetFromString(str(job["props"]))
     scene.Parse(props)

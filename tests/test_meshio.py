@@ -998,3 +998,37 @@ def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line(tmp_pat
 def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line_long(
         tmp_path_factory, case):
     mesh_contract(tmp_path_factory, *case)
+
+
+@pytest.mark.parametrize("with_normals", [True, False])
+def test_written_ply_reads_back_here_and_in_mitsuba(tmp_path, mi, with_normals):
+    # tracer.meshio.write_ply is how LuxCore gets its meshes (reference/luxcore.py): what
+    # it writes must be the mesh given, as float32, to this reader and to another one.
+    from tracer.meshio import write_ply as write_mesh
+
+    rng = np.random.default_rng(11)
+    v = rng.normal(size=(40, 3))
+    f = rng.integers(0, len(v), size=(70, 3))
+    n = rng.normal(size=(40, 3)) if with_normals else None
+    path = tmp_path / "w.ply"
+    write_mesh(path, v, f, n)
+    m = load_mesh(path)
+    f32 = v.astype(np.float32).astype(np.float64)
+    np.testing.assert_array_equal(m.vertices, f32)
+    np.testing.assert_array_equal(m.faces, f)
+    if with_normals:
+        n32 = n.astype(np.float32).astype(np.float64)
+        np.testing.assert_allclose(m.normals, n32 / np.linalg.norm(n32, axis=1, keepdims=True),
+                                   atol=F32_TOL)
+    else:
+        assert m.normals is None
+    params = mi.traverse(mi.load_dict({"type": "ply", "filename": str(path)}))
+    np.testing.assert_array_equal(np.array(params["faces"]).reshape(-1, 3), f)
+    np.testing.assert_array_equal(np.array(params["vertex_positions"]).reshape(-1, 3), f32)
+
+
+def test_written_ply_refuses_faces_out_of_range(tmp_path):
+    from tracer.meshio import write_ply as write_mesh
+
+    with pytest.raises(ValueError, match="out of range"):
+        write_mesh(tmp_path / "w.ply", np.zeros((3, 3)), [[0, 1, 3]])

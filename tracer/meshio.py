@@ -130,6 +130,33 @@ class MeshData:
                    if a is not None)
 
 
+def write_ply(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
+              normals: np.ndarray | None = None) -> None:
+    """Write a triangle mesh as a binary little-endian PLY: float32 ``x y z`` (and ``nx ny
+    nz`` where ``normals`` are given) per vertex, a ``vertex_indices`` list (uchar count,
+    int32 indices) per face; the layout :func:`load_mesh` reads back and LuxCore's reader
+    takes (reference/luxcore.py hands LuxCore its meshes this way)."""
+    v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
+    f = np.asarray(faces).reshape(-1, 3)
+    if len(f) and (f.min() < 0 or f.max() >= len(v)):
+        raise ValueError("face indices out of range")
+    names = ["x", "y", "z"] + (["nx", "ny", "nz"] if normals is not None else [])
+    rows = np.empty(len(v), dtype=[(k, "<f4") for k in names])
+    cols = v.T if normals is None else np.concatenate(
+        [v, np.asarray(normals, dtype=np.float64).reshape(-1, 3)], axis=1).T
+    for k, c in zip(names, cols, strict=True):
+        rows[k] = c
+    tris = np.empty(len(f), dtype=[("n", "u1"), ("i", "<i4", (3,))])
+    tris["n"], tris["i"] = 3, f
+    header = ("ply\nformat binary_little_endian 1.0\n"
+              f"element vertex {len(v)}\n" + "".join(f"property float {k}\n" for k in names)
+              + f"element face {len(f)}\nproperty list uchar int vertex_indices\nend_header\n")
+    with open(path, "wb") as fh:
+        fh.write(header.encode("ascii"))
+        fh.write(rows.tobytes())
+        fh.write(tris.tobytes())
+
+
 # ---------------------------------------------------------------------------
 # Loading, and the cache of parsed meshes
 # ---------------------------------------------------------------------------
