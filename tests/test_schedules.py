@@ -70,6 +70,27 @@ def test_stack_traces_the_wavefront_rays_and_light(name, max_depth, options):
                                atol=4 * (m - 1) * 2.0 ** -24 * float(np.max(a.image)) ** 2)
 
 
+
+def test_shared_trees_in_many_chunks_are_the_renders_of_each_seed():
+    """Shared ray trees split into chunks (a lane counts as ceil(S / SEEDS_PER_LANE_SAMPLE)
+    samples of one): each seed's image and variance are still, bit for bit, that seed's
+    own render, whatever the chunk (the last one partial here). Rows of a chunk written
+    at another chunk's place, or a chunk's seeds in the wrong order, break the equality."""
+    from tracer.integrator import SEEDS_PER_LANE_SAMPLE
+
+    scene = load_scene(resolve_scene("emitter_in_glass")).with_overrides(size=(24, 18), spp=16)
+    seeds = [3, 4, 5, 6, 7, 8]
+    lane_samples = -(-len(seeds) // SEEDS_PER_LANE_SAMPLE)
+    chunked = Integrator(scene, chunk_samples=16 * lane_samples * 29)   # 29 pixels a chunk
+    assert chunked._shares_trees(tuple(seeds))
+    together = chunked.render_seeds(seeds, moments=True)
+    whole = Integrator(scene)
+    for seed, r in zip(seeds, together, strict=True):
+        alone = whole.render(moments=True, seed=seed)
+        assert np.array_equal(r.image, alone.image)
+        assert np.array_equal(r.variance, alone.variance)
+
+
 def test_auto_takes_the_stack_where_rays_recurse():
     """Recursion (delta materials, max_depth > 2): the stack; direct light only: the
     wavefront's one level, whose camera kernel skips packets of missed rays."""

@@ -107,6 +107,17 @@ SIGNIFICANT_WEIGHT = 1e-3
 SCHEDULES = ("auto", "wavefront", "stack")
 
 
+#: The seeds a lane of shared ray trees (:meth:`Integrator.render_seeds`) carries for each
+#: sample it counts as in a chunk. Such a lane traces one tree and keeps a sum of light
+#: per seed: 16 seeds hold 16 sums (and their squares once evaluated) beside one ray's
+#: state, not 16 rays'. Counted as 16 samples, a chunk of 2^21 samples was 2^17 lanes,
+#: each chunk's kernel traced anew from Python (a 16-seed kernel: about 15-20 ms):
+#: heckbert_physical_hd's 16 seeds (256 x 256, 16 spp) took 0.40 s in 8 chunks, peaking
+#: at 232 MB; counted as 4, 0.26 s in 2 chunks, peaking at 407 MB (one chunk: 0.22 s,
+#: 440 MB; a throwaway script, peak resident memory of the process).
+SEEDS_PER_LANE_SAMPLE = 4
+
+
 @dataclass
 class RenderResult:
     """An image (H x W x 3, float32, linear radiance) and what it cost."""
@@ -736,7 +747,10 @@ class Integrator:
         shared = self._shares_trees(seeds)   # or spp samples, each carrying the S seeds
         max_depth = scene.film.max_depth
         total = W * H
-        per_chunk = max(1, self.chunk_samples // (spp * S))
+        # Pixels a chunk: chunk_samples samples, a lane that carries S seeds counting as
+        # ceil(S / SEEDS_PER_LANE_SAMPLE) (see there).
+        per_lane = -(-S // SEEDS_PER_LANE_SAMPLE) if shared else S
+        per_chunk = max(1, self.chunk_samples // (spp * per_lane))
         image = np.zeros((total * S, 3), dtype=np.float32)
         second = np.zeros((total * S, 3), dtype=np.float32) if moments else None
         splat = None if scene.film.filter == "box" else _Splat(scene.film)
