@@ -70,7 +70,6 @@ def test_stack_traces_the_wavefront_rays_and_light(name, max_depth, options):
                                atol=4 * (m - 1) * 2.0 ** -24 * float(np.max(a.image)) ** 2)
 
 
-
 def test_shared_trees_in_many_chunks_are_the_renders_of_each_seed():
     """Shared ray trees split into chunks (a lane counts as ceil(S / SEEDS_PER_LANE_SAMPLE)
     samples of one): each seed's image and variance are still, bit for bit, that seed's

@@ -113,8 +113,8 @@ SCHEDULES = ("auto", "wavefront", "stack")
 #: state, not 16 rays'. Counted as 16 samples, a chunk of 2^21 samples was 2^17 lanes,
 #: each chunk's kernel traced anew from Python (a 16-seed kernel: about 15-20 ms):
 #: heckbert_physical_hd's 16 seeds (256 x 256, 16 spp) took 0.40 s in 8 chunks, peaking
-#: at 232 MB; counted as 4, 0.26 s in 2 chunks, peaking at 407 MB (one chunk: 0.22 s,
-#: 440 MB; a throwaway script, peak resident memory of the process).
+#: at 232 MB; counted as 4, 0.26-0.29 s in 2 chunks, peaking at 407 MB (one chunk:
+#: 0.22 s, 440 MB; a throwaway script, peak resident memory of the process).
 SEEDS_PER_LANE_SAMPLE = 4
 
 
