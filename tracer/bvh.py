@@ -298,10 +298,16 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         nb = dr.select(cnt <= 8, U(4), dr.select(cnt <= 32, U(8), U(bins)))
         big = cnt > CHUNK
         dr.eval(nb, big)
-        # Small nodes, a lane each: box, centroid box and cheapest split.
-        best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _small_nodes(
-            lo, hi, first, cnt, nb, ~big, nbmax)
+        # Small nodes, a lane each: box, centroid box and cheapest split. Where every
+        # node is large (the top levels), _large_nodes fills every entry: nothing to trace.
         h_big = np.flatnonzero(h_cnt > CHUNK)
+        if len(h_big) < S:
+            best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _small_nodes(
+                lo, hi, first, cnt, nb, ~big, nbmax)
+        else:
+            best, best_axis, best_bin = dr.full(F, dr.inf, S), dr.zeros(U, S), dr.zeros(U, S)
+            box_lo, box_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
+            c_lo, c_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
         if len(h_big):
             best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _large_nodes(
                 lo, hi, h_first, h_cnt, h_big, nbmax, bins,
@@ -418,12 +424,18 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, small):
     q = dr.arange(U, len(h_big) * per)
     n_bins, bl, bh = _sum_bin_chunks(q // per, q % per, n_first, n_nc, per, k_n, k_blo, k_bhi)
     dr.eval(n_bins, bl, bh)
+    m = len(h_big)
     cnt = upload(U, h_cnt[h_big], np.uint32)
-    best = dr.full(F, dr.inf, len(h_big))
-    best_axis, best_bin = dr.zeros(U, len(h_big)), dr.zeros(U, len(h_big))
+    best = dr.full(F, dr.inf, m)
+    best_axis, best_bin = dr.zeros(U, m), dr.zeros(U, m)
+    # The three axes' sweeps in one call, lane a m + i for axis a of node i.
+    q = dr.arange(U, 3 * m)
+    costs, ats = _sweep(n_bins, bl, bh, (q % m) * per + (q // m) * nbmax,
+                        dr.full(U, bins, 3 * m), dr.gather(U, cnt, q % m))
+    dr.eval(costs, ats)
     for a in range(3):
-        off = dr.arange(U, len(h_big)) * per + a * nbmax
-        cost, at = _sweep(n_bins, bl, bh, off, dr.full(U, bins, len(h_big)), cnt)
+        cost = dr.gather(F, costs, dr.arange(U, m) + a * m)
+        at = dr.gather(U, ats, dr.arange(U, m) + a * m)
         better = (scale[a] > 0) & (cost < best)
         best = dr.select(better, cost, best)
         best_axis = dr.select(better, U(a), best_axis)
