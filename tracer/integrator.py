@@ -796,25 +796,22 @@ class Integrator:
                             stack.append((depth + 1, part))
             if splat is not None:
                 splat.add(radiance.value, fx, fy, first, count, spp)
-            elif shared:   # a sum per seed: each seed's rows of the chunk
+            else:
+                # rows: pixel by pixel, and in a pixel seed by seed; one sum of light a
+                # lane (its seed's samples in turn), or with shared trees a sum per seed
+                seed_sums = radiance.value if shared else (radiance.value,)
                 rows = slice(first * S, (first + count) * S)
                 for out, sq in ((image, False), (second, True)):
                     if out is None:
                         continue
                     means = [dr.block_sum(L * L if sq else L, spp) * (1.0 / spp)
-                             for L in radiance.value]
+                             for L in seed_sums]
                     dr.eval(means)
-                    view = out[rows].reshape(count, S, 3)
+                    view = out[rows].reshape(-1, len(means), 3)
                     for k, m in enumerate(means):
                         view[:, k] = m.numpy().T
-            else:
-                # rows: pixel by pixel, and in a pixel seed by seed
-                L = radiance.value
-                rows = slice(first * S, (first + count) * S)
-                image[rows] = (dr.block_sum(L, spp) * (1.0 / spp)).numpy().T
-                if second is not None:
-                    second[rows] = (dr.block_sum(L * L, spp) * (1.0 / spp)).numpy().T
-                del L
+                    del means
+                del seed_sums
             # The chunk's buffer is freed before the next chunk allocates its own, which
             # Dr.Jit's allocator then hands the same memory instead of new pages to fault
             # in: the first render of a process (three_lights, 640x480, 64 spp) spent
