@@ -159,6 +159,28 @@ def syntax(fn):
     return wrapper
 
 
+def lesser(a, b):
+    """The smaller of ``a`` and ``b`` for values that are never NaN: ``select(a < b, a, b)``.
+
+    ``drjit.minimum`` becomes LLVM's ``llvm.minimum``, which orders -0 below +0
+    and returns NaN where either side is NaN; on x86 without AVX10.2 its
+    lowering spends several more instructions than one ``vminps`` on those
+    cases. Where neither can matter (box slabs and bounds of finite numbers,
+    whose t values are compared, never divided by), the select is the one
+    instruction: the BVH's shadow rays on the 144,000-triangle knot 101 ms to
+    93 ms (medians of 7, a throwaway script of the traversal alone).
+    On a GPU both are one ``min.f32``.
+    """
+    import drjit as dr
+    return dr.select(a < b, a, b)
+
+
+def greater(a, b):
+    """The larger of ``a`` and ``b`` for values that are never NaN (see :func:`lesser`)."""
+    import drjit as dr
+    return dr.select(a > b, a, b)
+
+
 #: Byte boundary :func:`upload` puts an array's first element on.
 ALIGNMENT = 64
 

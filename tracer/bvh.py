@@ -66,7 +66,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import backend
-from tracer.backend import jit, upload
+from tracer.backend import greater, jit, lesser, upload
 from tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
@@ -188,7 +188,7 @@ def build_box_bvh(lo: np.ndarray, hi: np.ndarray, **options) -> BVHArrays:
 
 def _half_area_jit(lo, hi):
     """Half the surface area of boxes (Dr.Jit); empty boxes (hi < lo) give 0."""
-    d = dr.maximum(hi - lo, 0.0)
+    d = greater(hi - lo, 0.0)
     return d.x * d.y + d.y * d.z + d.z * d.x
 
 
@@ -469,8 +469,8 @@ def _chunk_boxes(lo, hi, first, cnt, stride=1, centroids=None):
             cl = ch = (tl + th) * 0.5
         else:
             cl, ch = dr.gather(A3, centroids[0], k), dr.gather(A3, centroids[1], k)
-        b_lo, b_hi = dr.minimum(b_lo, tl), dr.maximum(b_hi, th)
-        c_lo, c_hi = dr.minimum(c_lo, cl), dr.maximum(c_hi, ch)
+        b_lo, b_hi = lesser(b_lo, tl), greater(b_hi, th)
+        c_lo, c_hi = lesser(c_lo, cl), greater(c_hi, ch)
         j += 1
     return b_lo, b_hi, c_lo, c_hi
 
@@ -488,8 +488,8 @@ def _sum_bin_chunks(node, q, n_first, n_nc, per, k_n, k_blo, k_bhi):
     while j < m:
         k = (f + j) * per + q
         n += dr.gather(U, k_n, k)
-        b_lo = dr.minimum(b_lo, dr.gather(A3, k_blo, k))
-        b_hi = dr.maximum(b_hi, dr.gather(A3, k_bhi, k))
+        b_lo = lesser(b_lo, dr.gather(A3, k_blo, k))
+        b_hi = greater(b_hi, dr.gather(A3, k_bhi, k))
         j += 1
     return n, b_lo, b_hi
 
@@ -535,8 +535,8 @@ def _bin_triangles(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax, active):
             q = a * nbmax + _bin(c[a], c_lo[a], scale[a], nb)
             n_bin[q] = n_bin[q] + 1
             for m in range(3):
-                lo_bin[m][q] = dr.minimum(lo_bin[m][q], tl[m])
-                hi_bin[m][q] = dr.maximum(hi_bin[m][q], th[m])
+                lo_bin[m][q] = lesser(lo_bin[m][q], tl[m])
+                hi_bin[m][q] = greater(hi_bin[m][q], th[m])
         j += 1
     return n_bin, lo_bin, hi_bin
 
@@ -561,8 +561,8 @@ def _small_nodes(lo, hi, first, cnt, nb, active, nbmax):
         i = nb - 1
         while active & (i > 0):
             q = a * nbmax + i
-            run_lo = dr.minimum(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
-            run_hi = dr.maximum(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
+            run_lo = lesser(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
+            run_hi = greater(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
             run_n += n_bin[q]
             right[i] = _half_area_jit(run_lo, run_hi) * F(run_n)
             i -= 1
@@ -570,8 +570,8 @@ def _small_nodes(lo, hi, first, cnt, nb, active, nbmax):
         i = dr.zeros(U, S)
         while active & (i + 1 < nb):
             q = a * nbmax + i
-            run_lo = dr.minimum(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
-            run_hi = dr.maximum(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
+            run_lo = lesser(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
+            run_hi = greater(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
             run_n += n_bin[q]
             cost = _half_area_jit(run_lo, run_hi) * F(run_n) + right[i + 1]
             better = (scale[a] > 0) & (run_n > 0) & (run_n < cnt) & (cost < best)
@@ -597,8 +597,8 @@ def _sweep(b_cnt, b_lo, b_hi, off, nb, cnt):
     i = nb - 1
     while (nb > 0) & (i > 0):  # nb = 0: a node not binned here
         k = off + i
-        run_lo = dr.minimum(run_lo, dr.gather(A3, b_lo, k))
-        run_hi = dr.maximum(run_hi, dr.gather(A3, b_hi, k))
+        run_lo = lesser(run_lo, dr.gather(A3, b_lo, k))
+        run_hi = greater(run_hi, dr.gather(A3, b_hi, k))
         run_n += dr.gather(U, b_cnt, k)
         dr.scatter(right, _half_area_jit(run_lo, run_hi) * F(run_n), k)
         i -= 1
@@ -608,8 +608,8 @@ def _sweep(b_cnt, b_lo, b_hi, off, nb, cnt):
     i = dr.zeros(U, S)
     while i + 1 < nb:
         k = off + i
-        run_lo = dr.minimum(run_lo, dr.gather(A3, b_lo, k))
-        run_hi = dr.maximum(run_hi, dr.gather(A3, b_hi, k))
+        run_lo = lesser(run_lo, dr.gather(A3, b_lo, k))
+        run_hi = greater(run_hi, dr.gather(A3, b_hi, k))
         run_n += dr.gather(U, b_cnt, k)
         cost = _half_area_jit(run_lo, run_hi) * F(run_n) + dr.gather(F, right, k + 1)
         better = (run_n > 0) & (run_n < cnt) & (cost < best)
@@ -823,47 +823,26 @@ class BVH:
         # overwriting other rays' deferred nodes (seen as random crashes).
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
         nodes, tris = self.nodes, self.tris
-        # Widening t_far makes the float32 slab test conservative (Pharr, Jakob and
-        # Humphreys, "Physically Based Rendering", 3rd ed., section 3.9.2).
-        widen = 1 + 2 * GAMMA3
 
         while alive:
             # Inner nodes, until this ray stands at a leaf or has nothing left to visit.
             while alive & ((node & LEAF_FLAG) == 0):
-                # Memory accesses carry the loop's condition as an explicit mask: lanes
-                # that wait (at a leaf, or done) run the body too, with stale indices.
-                step = alive & ((node & LEAF_FLAG) == 0)
-                # Only the 14 floats used are read: Dr.Jit drops the unused gathers.
-                r = dr.gather(jit.ArrayXf, nodes, node, step, shape=(16, n))
-                tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
-                tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
-                # Entered before the nearest hit so far, and not only behind the origin.
-                hit_l = step & (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
-                hit_r = step & (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
-                ref_l = dr.reinterpret_array(jit.UInt32, r[12])
-                ref_r = dr.reinterpret_array(jit.UInt32, r[13])
-                # Both entered: go on with the nearer, defer the other.
-                r_first = tn_r < tn_l
-                near = dr.select(hit_l & ~(hit_r & r_first), ref_l, ref_r)
-                both = hit_l & hit_r
-                stack.write(dr.select(r_first, ref_l, ref_r), sp, both)
-                sp = dr.select(both, sp + 1, sp)
-                # Neither: the deferred node pushed last, or the end of the ray.
-                descend = hit_l | hit_r
-                pop = step & ~descend & (sp > 0)
-                sp = dr.select(pop, sp - 1, sp)
-                node = dr.select(descend, near, dr.select(pop, stack.read(sp, pop), node))
-                alive &= ~step | descend | pop
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, o, inv, t)
 
             # The leaf's triangles, one after the other.
             i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
             end = i + (node & ((1 << COUNT_BITS) - 1))
             while alive & (i < end):
-                q = dr.gather(jit.ArrayXf, tris, i, alive & (i < end), shape=(16, n))
+                # Floats 0-7 of the record in one packet gather, float 8 alone: gathering
+                # all 16 (two packets) for the nine used took the camera rays of the
+                # knot from 72.5 to 69-71 ms (a throwaway script, medians of 7).
+                at = alive & (i < end)
+                q = [*dr.gather(jit.ArrayXf, tris, i * 2, at, shape=(8, n)),
+                     dr.gather(jit.Float, tris, i * 16 + 8, at)]
                 tk, hk, bk, gk = tri_f.intersect(
                     o, d, jit.Array3f(q[0], q[1], q[2]), jit.Array3f(q[3], q[4], q[5]),
                     jit.Array3f(q[6], q[7], q[8]), t, rs)
-                hk &= alive & (i < end)
+                hk &= at
                 t = dr.select(hk, tk, t)
                 tri = dr.select(hk, i, tri)
                 beta = dr.select(hk, bk, beta)
@@ -881,6 +860,53 @@ class BVH:
         return t, tri, beta, gamma
 
 
+@backend.syntax
+def inner_step(nodes, node, sp, stack, alive, o, inv, t):
+    """One step of a ray at an inner node: (node, sp, alive) after it.
+
+    The node's two child boxes (:func:`pack_nodes`) are tested with the slab
+    test; the ray goes on to the nearer child it enters, deferring the other on
+    its ``stack`` (a Dr.Jit local array, ``sp`` its fill), or, entering
+    neither, pops the node deferred last, or ends (``alive`` false). Lanes
+    where ``alive`` is false or ``node`` is a leaf keep their state. Used by
+    :class:`BVH` and by the instance hierarchy of :mod:`tracer.geometry`.
+    """
+    n = dr.width(t)
+    # Memory accesses carry the loop's condition as an explicit mask: lanes that wait (at a
+    # leaf, or done) run the body too, with stale indices.
+    step = alive & ((node & LEAF_FLAG) == 0)
+    # Only the 14 floats used are read: Dr.Jit drops the unused gathers.
+    r = dr.gather(jit.ArrayXf, nodes, node, step, shape=(16, n))
+    tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
+    tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
+    # Entered before the nearest hit so far, and not only behind the origin. Widening
+    # t_far makes the float32 slab test conservative (Pharr, Jakob and Humphreys,
+    # "Physically Based Rendering", 3rd ed., section 3.9.2).
+    widen = 1 + 2 * GAMMA3
+    hit_l = step & (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
+    hit_r = step & (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
+    ref_l = dr.reinterpret_array(jit.UInt32, r[12])
+    ref_r = dr.reinterpret_array(jit.UInt32, r[13])
+    # Both entered: go on with the nearer, defer the other.
+    r_first = tn_r < tn_l
+    near = dr.select(hit_l & ~(hit_r & r_first), ref_l, ref_r)
+    both = hit_l & hit_r
+    # In a branch that a SIMD packet where no ray defers a node skips (with the write
+    # unconditional, each step paid for Dr.Jit's test of whether the packet's stack
+    # pointers agree): the knot's shadow rays 95.2 to 92.7 ms (a throwaway script,
+    # medians of 7, two runs).
+    if both:
+        stack.write(dr.select(r_first, ref_l, ref_r), sp, both)
+    sp = dr.select(both, sp + 1, sp)
+    # Neither: the deferred node pushed last, or the end of the ray.
+    descend = hit_l | hit_r
+    pop = step & ~descend & (sp > 0)
+    sp = dr.select(pop, sp - 1, sp)
+    node = dr.select(descend, near, dr.select(pop, stack.read(sp, pop), node))
+    alive &= ~step | descend | pop
+    return node, sp, alive
+
+
 def _slab(o, inv, lx, ly, lz, hx, hy, hz):
     """(t_near, t_far) of the ray o + t d against the box [l, h], given inv = 1 / d.
 
@@ -894,10 +920,10 @@ def _slab(o, inv, lx, ly, lz, hx, hy, hz):
     t0x, t1x = (lx - o.x) * inv.x, (hx - o.x) * inv.x
     t0y, t1y = (ly - o.y) * inv.y, (hy - o.y) * inv.y
     t0z, t1z = (lz - o.z) * inv.z, (hz - o.z) * inv.z
-    tn = dr.maximum(dr.maximum(dr.minimum(t0x, t1x), dr.minimum(t0y, t1y)),
-                    dr.minimum(t0z, t1z))
-    tf = dr.minimum(dr.minimum(dr.maximum(t0x, t1x), dr.maximum(t0y, t1y)),
-                    dr.maximum(t0z, t1z))
+    # No t is NaN (inv is finite, the boxes and origins are finite), so the selects of
+    # backend.lesser/greater give the same t_near and t_far as drjit.minimum/maximum.
+    tn = greater(greater(lesser(t0x, t1x), lesser(t0y, t1y)), lesser(t0z, t1z))
+    tf = lesser(lesser(greater(t0x, t1x), greater(t0y, t1y)), greater(t0z, t1z))
     return tn, tf
 
 

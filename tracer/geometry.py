@@ -531,7 +531,7 @@ class _InstanceSetBlock(_Block):
 
     @backend.syntax
     def _loop(self, o, d, t, prim, alive):
-        from tracer.bvh import COUNT_BITS, GAMMA3, LEAF_FLAG
+        from tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step
 
         n = dr.width(t)
         tiny = 1e-30
@@ -541,29 +541,11 @@ class _InstanceSetBlock(_Block):
         sp = dr.zeros(jit.UInt32, n)
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
         nodes = self.nodes
-        widen = 1 + 2 * GAMMA3
         base, m = self.base, self.child.count
 
         while alive:
             while alive & ((node & LEAF_FLAG) == 0):
-                step = alive & ((node & LEAF_FLAG) == 0)
-                r = dr.gather(jit.ArrayXf, nodes, node, step, shape=(16, n))
-                tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
-                tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
-                hit_l = step & (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
-                hit_r = step & (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
-                ref_l = dr.reinterpret_array(jit.UInt32, r[12])
-                ref_r = dr.reinterpret_array(jit.UInt32, r[13])
-                r_first = tn_r < tn_l
-                near = dr.select(hit_l & ~(hit_r & r_first), ref_l, ref_r)
-                both = hit_l & hit_r
-                stack.write(dr.select(r_first, ref_l, ref_r), sp, both)
-                sp = dr.select(both, sp + 1, sp)
-                descend = hit_l | hit_r
-                pop = step & ~descend & (sp > 0)
-                sp = dr.select(pop, sp - 1, sp)
-                node = dr.select(descend, near, dr.select(pop, stack.read(sp, pop), node))
-                alive &= ~step | descend | pop
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, o, inv, t)
 
             # The leaf's instances: the ray in each one's object space, the group asked.
             i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
@@ -608,18 +590,6 @@ def instance_normal_matrix(m: np.ndarray) -> np.ndarray:
     if faults.on("instance-normal-by-matrix"):
         return m3.copy()
     return np.swapaxes(np.linalg.inv(m3), -1, -2)
-
-
-def _slab(o, inv, lx, ly, lz, hx, hy, hz):
-    """(t_near, t_far) of a ray against a box (Kay and Kajiya 1986), as tracer.bvh's."""
-    t0x, t1x = (lx - o.x) * inv.x, (hx - o.x) * inv.x
-    t0y, t1y = (ly - o.y) * inv.y, (hy - o.y) * inv.y
-    t0z, t1z = (lz - o.z) * inv.z, (hz - o.z) * inv.z
-    tn = dr.maximum(dr.maximum(dr.minimum(t0x, t1x), dr.minimum(t0y, t1y)),
-                    dr.minimum(t0z, t1z))
-    tf = dr.minimum(dr.minimum(dr.maximum(t0x, t1x), dr.maximum(t0y, t1y)),
-                    dr.maximum(t0z, t1z))
-    return tn, tf
 
 
 # --------------------------------------------------------------------------- geometry
