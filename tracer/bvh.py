@@ -875,8 +875,16 @@ def inner_step(nodes, node, sp, stack, alive, o, inv, t):
     # Memory accesses carry the loop's condition as an explicit mask: lanes that wait (at a
     # leaf, or done) run the body too, with stale indices.
     step = alive & ((node & LEAF_FLAG) == 0)
-    # Only the 14 floats used are read: Dr.Jit drops the unused gathers.
-    r = dr.gather(jit.ArrayXf, nodes, node, step, shape=(16, n))
+    # The 14 floats used: 0-7 in one packet gather (16 loads of 8 floats and a transpose,
+    # whose shuffles and pointer extractions share one port of the CPU), 8-13 in six
+    # plain gathers (16 loads each, on the load ports). Two packets (all 16 floats) kept
+    # the shuffle port the busiest; 14 plain gathers the load ports. The mix: the knot's
+    # shadow rays 96.6-101 to 88.6-89.3 ms, its camera rays 73.3-73.7 to 65.2-66.9 ms
+    # (a throwaway script tracing them alone, medians of 7, two runs); a packet of 8, one
+    # of 4 and two plain gathers, or one of 4 and ten plain gathers, were no faster than
+    # two packets.
+    r = [*dr.gather(jit.ArrayXf, nodes, node * 2, step, shape=(8, n)),
+         *(dr.gather(jit.Float, nodes, node * 16 + k, step) for k in range(8, 14))]
     tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
     tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
     # Entered before the nearest hit so far, and not only behind the origin. Widening
