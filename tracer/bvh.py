@@ -806,11 +806,7 @@ class BVH:
         packet do the same kind of work at the same time.
         """
         n = dr.width(t)
-        # 1 / d for the slab test; a zero component becomes a tiny one of the same sign,
-        # so that (l - o) / d is +-huge rather than the NaN of 0 * inf.
-        tiny = 1e-30
-        inv = 1.0 / jit.Array3f(*(dr.select(dr.abs(d[k]) < tiny, dr.copysign(tiny, d[k]), d[k])
-                                  for k in range(3)))
+        inv = inverse_direction(d)
         rs = tri_f.ray_space(o, d)  # the triangle test's per-ray part, once per ray
         tri = dr.full(jit.UInt32, INVALID, n)
         beta = dr.zeros(jit.Float, n)
@@ -858,6 +854,14 @@ class BVH:
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
         return t, tri, beta, gamma
+
+
+def inverse_direction(d):
+    """1 / d for the slab test (:func:`_slab`), per ray: a zero component becomes a tiny
+    one of the same sign, so that (l - o) / d is +-huge rather than the NaN of 0 * inf."""
+    tiny = 1e-30
+    return 1.0 / jit.Array3f(*(dr.select(dr.abs(d[k]) < tiny, dr.copysign(tiny, d[k]), d[k])
+                               for k in range(3)))
 
 
 @backend.syntax

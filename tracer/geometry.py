@@ -531,12 +531,10 @@ class _InstanceSetBlock(_Block):
 
     @backend.syntax
     def _loop(self, o, d, t, prim, alive):
-        from tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step
+        from tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
 
         n = dr.width(t)
-        tiny = 1e-30
-        inv = 1.0 / jit.Array3f(*(dr.select(dr.abs(d[k]) < tiny, dr.copysign(tiny, d[k]), d[k])
-                                  for k in range(3)))
+        inv = inverse_direction(d)
         node = dr.full(jit.UInt32, self._root, n)
         sp = dr.zeros(jit.UInt32, n)
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
