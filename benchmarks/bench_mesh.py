@@ -4,7 +4,7 @@ Generates a torus-knot mesh of 2 x segments x sides triangles (default 144,000),
 places it in a scene lit by a point light, and renders it with the tracer and
 with Mitsuba's `direct` integrator at the same size and samples per pixel.
 Prints the BVH build time, the median render times after a warm-up, and
-their ratio (the target: the tracer within 3x of Mitsuba); and the time to
+their ratio (the target: the tracer within 1.5x of Mitsuba); and the time to
 read the mesh file (tracer/meshio.py): parsed (the PLY, and the same mesh
 written as OBJ), and loaded again (the cache's hit).
 

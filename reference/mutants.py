@@ -238,11 +238,11 @@ CATALOG: tuple[Mutant, ...] = (
     _m("shadow-acne",
        "Shadow rays start exactly on the surface, without an offset, and may hit it.",
        "o = p", "o = p + eps n (n on the light's side)",
-       L1, "Shadow computation", "tracer/integrator.py: Integrator._shade"),
+       L1, "Shadow computation", "tracer/integrator.py: Integrator._shadow_ray"),
     _m("shadow-ray-past-light",
        "Shadow rays are not stopped at the light: anything beyond it casts a shadow.",
        "t_max = inf", "t_max = |light - p| (1 - eps)",
-       L1, "Shadow computation", "tracer/integrator.py: Integrator._shade"),
+       L1, "Shadow computation", "tracer/integrator.py: Integrator._shadow_ray"),
     # --- intersections and normals ---------------------------------------------------------
     _m("sphere-near-root-from-inside",
        "The ray-sphere test always takes the smaller root, so a ray starting inside "
@@ -279,7 +279,7 @@ CATALOG: tuple[Mutant, ...] = (
        "Two-sided shading forgets to turn the normal towards the side the ray comes "
        "from, so back faces go dark.",
        "N = n", "N = n if n . d < 0 else -n",
-       L2, "Diffuse term", "tracer/integrator.py: Integrator._shade"),
+       L2, "Diffuse term", "tracer/integrator.py: Integrator._hit_point"),
     # --- cameras ---------------------------------------------------------------------------
     _m("fov-vertical-for-horizontal",
        "The horizontal field of view is used as the vertical one.",

@@ -234,6 +234,14 @@ def greater(a, b):
     return dr.select(a > b, a, b)
 
 
+def any_mask(masks):
+    """The lanes where any of the masks (a non-empty sequence of jit.Bool) is true."""
+    out = masks[0]
+    for m in masks[1:]:
+        out = out | m
+    return out
+
+
 #: Byte boundary :func:`upload` puts an array's first element on.
 ALIGNMENT = 64
 

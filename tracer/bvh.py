@@ -45,14 +45,22 @@ its stack is empty (or, for shadow rays, at the first hit). Triangles are
 tested by :func:`tracer.shapes.triangle.intersect`, the test the rest of the
 tracer uses, so results agree with a brute-force loop over all triangles.
 
+A lane may also carry K rays that walk the tree together, as a packet
+(:meth:`BVH.closest_hit_group`, :meth:`BVH.occluded_group`): one stack, each
+node and triangle read once for the K rays. On a CPU a node step's time goes
+to reading its record, per lane (Dr.Jit has no load that the lanes of a SIMD
+packet share), while the K slab tests are cheap; the integrator gives a lane
+K samples of one pixel (:data:`tracer.integrator.GROUP`). The knot of
+``benchmarks/bench_mesh.py``, its camera rays alone: 86 to 58 ms with K = 4,
+its shadow rays 75 to 50 ms (a throwaway script, medians of 5).
+
 Choices measured on the LLVM backend (AVX-512, 2 cores), against Mitsuba 3's
 Embree on the same rays: testing a leaf's triangles in a loop of their own
 (rather than a fixed number of masked tests per step) and placing records on
 64-byte boundaries each gave about 1.7x; a 4-wide tree, reading records as
 Array4f packets, and a stack of entry distances to skip deferred nodes were
-each slower. With these, closest hits on a 100,000
-triangle mesh take about 2x Embree's time (tests/test_bvh.py checks results,
-never times).
+each slower. tests/test_bvh.py and tests/test_packets.py check results, never
+times; ``benchmarks/bench_mesh.py`` times the render against Embree's.
 """
 
 from __future__ import annotations
@@ -66,7 +74,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import backend
-from tracer.backend import greater, jit, lesser, upload
+from tracer.backend import any_mask, greater, jit, lesser, upload
 from tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
@@ -770,47 +778,82 @@ class BVH:
         inactive (t is tmax there); (beta, gamma) are the barycentrics of
         :func:`tracer.shapes.triangle.intersect`, which tests every triangle.
         """
-        return self._trace(o, d, tmax, active, shadow=False)
+        return self._trace([(o, d, tmax, active)], shadow=False)[0]
 
     def occluded(self, o: jit.Array3f, d: jit.Array3f, tmax: jit.Float | float,
                  active: jit.Bool | bool = True) -> jit.Bool:
         """jit.Bool: some triangle lies on the ray at 0 < t < tmax (found as soon as any is)."""
-        _, tri, _, _ = self._trace(o, d, tmax, active, shadow=True)
-        return tri != INVALID
+        return self.occluded_group([(o, d, tmax, active)])[0]
+
+    def closest_hit_group(self, rays: list) -> list:
+        """:meth:`closest_hit` of K rays a lane: ``rays`` is a list of K (o, d, tmax,
+        active), all of one width; the answer is a list of K (t, tri, beta, gamma).
+
+        The K rays of a lane walk the tree together, as a packet (Wald, Slusallek,
+        Benthin and Wagner, "Interactive Rendering with Coherent Ray Tracing",
+        Eurographics 2001): each node is read once for the K rays and entered if
+        any of them enters it, and each triangle of a leaf so reached is read once
+        and tested against all K. Every ray still visits every node its own walk
+        would, so each answer is the nearest hit, as :meth:`closest_hit` finds it
+        (where two triangles meet a ray at the same t, as at a shared edge, either
+        may be reported). The gain is in reads: a node step costs the CPU mostly
+        the reads of its record, once per lane, while the slab tests are cheap
+        vector arithmetic. Rays of one lane should be alike (samples of one
+        pixel, their shadow rays to one light), or the packet visits the union of
+        very different walks.
+        """
+        return self._trace(rays, shadow=False)
+
+    def occluded_group(self, rays: list) -> list:
+        """:meth:`occluded` of K rays a lane (see :meth:`closest_hit_group`): a list of
+        K jit.Bool. The packet stops when each of its rays is blocked or done."""
+        return [tri != INVALID for _, tri, _, _ in self._trace(rays, shadow=True)]
 
     # ---------------------------------------------------------------- traversal
 
-    def _trace(self, o, d, tmax, active, shadow):
-        o, d = jit.Array3f(o), jit.Array3f(d)
-        n = max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(active))
-        t = jit.Float(tmax) + dr.zeros(jit.Float, n)
-        alive = jit.Bool(active) | dr.zeros(jit.Bool, n)
+    def _trace(self, rays, shadow):
+        rays = [(jit.Array3f(o), jit.Array3f(d), tmax, active) for o, d, tmax, active in rays]
+        n = max(max(dr.width(o), dr.width(d), dr.width(tmax), dr.width(a))
+                for o, d, tmax, a in rays)
+        ts = [jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays]
+        acts = [jit.Bool(a) | dr.zeros(jit.Bool, n) for _, _, _, a in rays]
         if self.triangle_count == 0:
             z = dr.zeros(jit.Float, n)
-            return t, dr.full(jit.UInt32, INVALID, n), z, z
-        t, tri, beta, gamma = self._loop(o, d, t, alive, shadow)
+            return [(t, dr.full(jit.UInt32, INVALID, n), z, z) for t in ts]
+        out = self._loop([o for o, _, _, _ in rays], [d for _, d, _, _ in rays], ts, acts,
+                         shadow)
         # Back to the caller's triangle numbering.
-        found = tri != INVALID
-        orig = dr.gather(jit.UInt32, self.perm, tri, found)
-        return t, dr.select(found, orig, INVALID), beta, gamma
+        res = []
+        for t, tri, beta, gamma in out:
+            found = tri != INVALID
+            orig = dr.gather(jit.UInt32, self.perm, tri, found)
+            res.append((t, dr.select(found, orig, INVALID), beta, gamma))
+        return res
 
     @backend.syntax
-    def _loop(self, o, d, t, alive, shadow):
-        """The traversal, "while-while" in the words of Aila and Laine (2009).
+    def _loop(self, os, ds, ts, acts, shadow):
+        """The traversal of K rays a lane, "while-while" in the words of Aila and Laine
+        (2009).
 
-        Each pass of the outer loop walks inner nodes until the ray stands at a
-        leaf, then tests the leaf's triangles, then pops the next deferred
-        node. Dr.Jit runs a loop for a packet of rays (16 on a CPU with AVX-512,
-        a warp on a GPU) until all of them are done with it, so keeping the
-        node steps and the triangle tests in separate loops lets the rays of a
-        packet do the same kind of work at the same time.
+        Each pass of the outer loop walks inner nodes until the lane stands at a
+        leaf, then tests the leaf's triangles, then pops the next deferred node.
+        Dr.Jit runs a loop for a packet of lanes (16 on a CPU with AVX-512, a warp
+        on a GPU) until all of them are done with it, so keeping the node steps and
+        the triangle tests in separate loops lets the lanes of a packet do the same
+        kind of work at the same time. With K = 1 a lane is one ray; with K > 1,
+        ``acts`` says which rays still take part (a shadow ray leaves when blocked).
         """
-        n = dr.width(t)
-        inv = inverse_direction(d)
-        rs = tri_f.ray_space(o, d)  # the triangle test's per-ray part, once per ray
-        tri = dr.full(jit.UInt32, INVALID, n)
-        beta = dr.zeros(jit.Float, n)
-        gamma = dr.zeros(jit.Float, n)
+        K = len(os)
+        n = dr.width(ts[0])
+        invs = [inverse_direction(d) for d in ds]
+        # The triangle test's per-ray part, once per ray.
+        rss = [tri_f.ray_space(os[k], ds[k]) for k in range(K)]
+        tris = [dr.full(jit.UInt32, INVALID, n) for _ in range(K)]
+        betas = [dr.zeros(jit.Float, n) for _ in range(K)]
+        gammas = [dr.zeros(jit.Float, n) for _ in range(K)]
+        alive = any_mask(acts)
+        if K == 1:
+            acts = None  # alive is the one ray's state
         node = dr.full(jit.UInt32, self._root, n)
         sp = dr.zeros(jit.UInt32, n)
         # Initialised although never read before written: with an uninitialised
@@ -818,12 +861,13 @@ class BVH:
         # read-modify-write of a slot as undefined and store all 16 lanes,
         # overwriting other rays' deferred nodes (seen as random crashes).
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
-        nodes, tris = self.nodes, self.tris
+        nodes, tri_data = self.nodes, self.tris
 
         while alive:
-            # Inner nodes, until this ray stands at a leaf or has nothing left to visit.
+            # Inner nodes, until this lane stands at a leaf or has nothing left to visit.
             while alive & ((node & LEAF_FLAG) == 0):
-                node, sp, alive = inner_step(nodes, node, sp, stack, alive, o, inv, t, shadow)
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, os, invs, ts,
+                                             shadow, acts)
 
             # The leaf's triangles, one after the other.
             i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
@@ -833,27 +877,31 @@ class BVH:
                 # all 16 (two packets) for the nine used took the camera rays of the
                 # knot from 72.5 to 69-71 ms (a throwaway script, medians of 7).
                 at = alive & (i < end)
-                q = [*dr.gather(jit.ArrayXf, tris, i * 2, at, shape=(8, n)),
-                     dr.gather(jit.Float, tris, i * 16 + 8, at)]
-                tk, hk, bk, gk = tri_f.intersect(
-                    o, d, jit.Array3f(q[0], q[1], q[2]), jit.Array3f(q[3], q[4], q[5]),
-                    jit.Array3f(q[6], q[7], q[8]), t, rs)
-                hk &= at
-                t = dr.select(hk, tk, t)
-                tri = dr.select(hk, i, tri)
-                beta = dr.select(hk, bk, beta)
-                gamma = dr.select(hk, gk, gamma)
+                q = [*dr.gather(jit.ArrayXf, tri_data, i * 2, at, shape=(8, n)),
+                     dr.gather(jit.Float, tri_data, i * 16 + 8, at)]
+                p0 = jit.Array3f(q[0], q[1], q[2])
+                p1 = jit.Array3f(q[3], q[4], q[5])
+                p2 = jit.Array3f(q[6], q[7], q[8])
+                for k in range(K):
+                    tk, hk, bk, gk = tri_f.intersect(os[k], ds[k], p0, p1, p2, ts[k], rss[k])
+                    hk = hk & (at if acts is None else at & acts[k])
+                    ts[k] = dr.select(hk, tk, ts[k])
+                    tris[k] = dr.select(hk, i, tris[k])
+                    betas[k] = dr.select(hk, bk, betas[k])
+                    gammas[k] = dr.select(hk, gk, gammas[k])
+                    if shadow and acts is not None:
+                        acts[k] = acts[k] & ~hk   # blocked: done
                 i += 1
-                if shadow:
-                    i = dr.select(hk, end, i)  # any hit will do
+                if shadow:  # any hit will do
+                    i = dr.select(hk if acts is None else ~any_mask(acts), end, i)
 
             pop = alive & (sp > 0)
             if shadow:
-                pop &= tri == INVALID
+                pop &= (tris[0] == INVALID) if acts is None else any_mask(acts)
             sp = dr.select(pop, sp - 1, sp)
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
-        return t, tri, beta, gamma
+        return list(zip(ts, tris, betas, gammas, strict=True))
 
 
 def inverse_direction(d):
@@ -865,18 +913,21 @@ def inverse_direction(d):
 
 
 @backend.syntax
-def inner_step(nodes, node, sp, stack, alive, o, inv, t, far_first=False):
-    """One step of a ray at an inner node: (node, sp, alive) after it.
+def inner_step(nodes, node, sp, stack, alive, os, invs, ts, far_first=False, acts=None):
+    """One step of a lane at an inner node: (node, sp, alive) after it.
 
-    The node's two child boxes (:func:`pack_nodes`) are tested with the slab
-    test; the ray goes on to the nearer child it enters (the farther with
-    ``far_first``), deferring the other on its ``stack`` (a Dr.Jit local
-    array, ``sp`` its fill), or, entering neither, pops the node deferred
-    last, or ends (``alive`` false). Lanes where ``alive`` is false or
-    ``node`` is a leaf keep their state. Used by :class:`BVH` and by the
-    instance hierarchy of :mod:`tracer.geometry`.
+    ``os``, ``invs`` and ``ts`` are lists of the lane's K rays' origins, inverse
+    directions (:func:`inverse_direction`) and nearest hits so far; ``acts``
+    (K > 1) says which of them take part. The node's two child boxes
+    (:func:`pack_nodes`) are tested with the slab test, for each ray; the lane
+    enters a child if one of its rays does, goes on to the nearer child it
+    enters (the farther with ``far_first``; as the first ray sees them), deferring
+    the other on its ``stack`` (a Dr.Jit local array, ``sp`` its fill), or,
+    entering neither, pops the node deferred last, or ends (``alive`` false).
+    Lanes where ``alive`` is false or ``node`` is a leaf keep their state. Used by
+    :class:`BVH` and by the instance hierarchy of :mod:`tracer.geometry`.
     """
-    n = dr.width(t)
+    n = dr.width(ts[0])
     # Memory accesses carry the loop's condition as an explicit mask: lanes that wait (at a
     # leaf, or done) run the body too, with stale indices.
     step = alive & ((node & LEAF_FLAG) == 0)
@@ -890,14 +941,23 @@ def inner_step(nodes, node, sp, stack, alive, o, inv, t, far_first=False):
     # two packets.
     r = [*dr.gather(jit.ArrayXf, nodes, node * 2, step, shape=(8, n)),
          *(dr.gather(jit.Float, nodes, node * 16 + k, step) for k in range(8, 14))]
-    tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
-    tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
     # Entered before the nearest hit so far, and not only behind the origin. Widening
     # t_far makes the float32 slab test conservative (Pharr, Jakob and Humphreys,
     # "Physically Based Rendering", 3rd ed., section 3.9.2).
     widen = 1 + 2 * GAMMA3
-    hit_l = step & (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
-    hit_r = step & (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
+    hit_l, hit_r, tn_l0, tn_r0 = step, step, None, None
+    for k in range(len(os)):
+        o, inv, t = os[k], invs[k], ts[k]
+        tn_l, tf_l = _slab(o, inv, r[0], r[1], r[2], r[6], r[7], r[8])
+        tn_r, tf_r = _slab(o, inv, r[3], r[4], r[5], r[9], r[10], r[11])
+        hl = (tn_l <= tf_l * widen) & (tf_l > 0) & (tn_l < t)
+        hr = (tn_r <= tf_r * widen) & (tf_r > 0) & (tn_r < t)
+        if acts is not None:
+            hl, hr = hl & acts[k], hr & acts[k]
+        if k == 0:
+            hit_l, hit_r, tn_l0, tn_r0 = step & hl, step & hr, tn_l, tn_r
+        else:
+            hit_l, hit_r = hit_l | (step & hl), hit_r | (step & hr)
     ref_l = dr.reinterpret_array(jit.UInt32, r[12])
     ref_r = dr.reinterpret_array(jit.UInt32, r[13])
     # Both entered: go on with the nearer, defer the other. With ``far_first`` (a
@@ -906,7 +966,7 @@ def inner_step(nodes, node, sp, stack, alive, o, inv, t, far_first=False):
     # seldom block it, while what blocks it lies further along. The knot's render
     # (bench_mesh.py's scene) 0.257 s to 0.238-0.240 s (a throwaway script, medians of
     # 7, alternating); an unblocked ray visits the same nodes in either order.
-    r_first = (tn_r >= tn_l) if far_first else (tn_r < tn_l)
+    r_first = (tn_r0 >= tn_l0) if far_first else (tn_r0 < tn_l0)
     near = dr.select(hit_l & ~(hit_r & r_first), ref_l, ref_r)
     both = hit_l & hit_r
     # In a branch that a SIMD packet where no ray defers a node skips (with the write

@@ -34,7 +34,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import backend, faults
-from tracer.backend import jit, upload, upload_rows
+from tracer.backend import any_mask, jit, upload, upload_rows
 from tracer.scene import (
     Cylinder,
     Disk,
@@ -134,6 +134,18 @@ class _Block:
         _, prim = self.intersect(o, d, tmax, dr.full(jit.UInt32, INVALID, dr.width(tmax)),
                                  active)
         return prim != INVALID
+
+    def intersect_group(self, rays, ts, prims):
+        """:meth:`intersect` of K rays a lane, ``rays`` a list of K (o, d, active): lists
+        of K t and prim. By default each ray on its own; a block that can walk the K
+        rays of a lane together (:class:`_MeshBlock`) does."""
+        out = [self.intersect(o, d, t, prim, a)
+               for (o, d, a), t, prim in zip(rays, ts, prims, strict=True)]
+        return [t for t, _ in out], [prim for _, prim in out]
+
+    def occluded_group(self, rays):
+        """:meth:`occluded` of K rays a lane, ``rays`` a list of K (o, d, tmax, active)."""
+        return [self.occluded(*ray) for ray in rays]
 
     def _update(self, ti, hit, i, t, prim):
         return dr.select(hit, ti, t), dr.select(hit, i + self.base, prim)
@@ -390,6 +402,20 @@ class _MeshBlock(_Block):
     def occluded(self, o, d, tmax, active):
         return self.bvh.occluded(o, d, tmax, active)
 
+    def intersect_group(self, rays, ts, prims):
+        if len(rays) == 1:
+            (o, d, a), = rays
+            t, prim = self.intersect(o, d, ts[0], prims[0], a)
+            return [t], [prim]
+        found = self.bvh.closest_hit_group([(o, d, t, a) for (o, d, a), t
+                                            in zip(rays, ts, strict=True)])
+        out = [self._update(ti, tri != INVALID, tri, t, prim)
+               for (ti, tri, _, _), t, prim in zip(found, ts, prims, strict=True)]
+        return [t for t, _ in out], [prim for _, prim in out]
+
+    def occluded_group(self, rays):
+        return self.bvh.occluded_group(rays)
+
     def surface(self, k, o, d, t, mask):
         i0 = dr.gather(jit.UInt32, self.faces, 3 * k, mask)
         i1 = dr.gather(jit.UInt32, self.faces, 3 * k + 1, mask)
@@ -543,7 +569,7 @@ class _InstanceSetBlock(_Block):
 
         while alive:
             while alive & ((node & LEAF_FLAG) == 0):
-                node, sp, alive = inner_step(nodes, node, sp, stack, alive, o, inv, t)
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, [o], [inv], [t])
 
             # The leaf's instances: the ray in each one's object space, the group asked.
             i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
@@ -659,6 +685,8 @@ class Geometry:
         rad = np.concatenate(rads) if rads else np.zeros((1, 3), dtype=np.float32)
         self.material_id = _u(mid if len(mid) else np.zeros(1, dtype=np.uint32))
         self.radiance = _v3(rad if len(rad) else np.zeros((1, 3), dtype=np.float32))
+        #: whether a triangle mesh is among the blocks (top level only)
+        self.has_mesh = any(isinstance(b, _MeshBlock) for b in self.blocks)
         #: the shapes that emit light (area lights), top level only
         self.emitters = [s for s in shapes if getattr(s, "emitter", None) is not None]
 
@@ -699,6 +727,54 @@ class Geometry:
         # Inactive lanes keep False (the loop's condition).
         return self._once(active, lambda blocked: (self._any(o, d, tmax, active),),
                           (dr.zeros(jit.Bool, n),))[0]
+
+    def closest_hit_group(self, rays: list) -> list:
+        """:meth:`closest_hit` of K rays a lane: ``rays`` a list of K (o, d, tmax, active)
+        of one width, the answer a list of K :class:`Hit`. A mesh walks its BVH with
+        the K rays of a lane together (:meth:`tracer.bvh.BVH.closest_hit_group`), so the
+        rays of a lane should be alike (samples of one pixel); the hits are those of
+        :meth:`closest_hit` for each ray."""
+        if len(rays) == 1:
+            return [self.closest_hit(*rays[0])]
+        n = max(dr.width(x) for ray in rays for x in ray)
+        ts = [jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays]
+        prims = [dr.full(jit.UInt32, INVALID, n) for _ in rays]
+        actives = [jit.Bool(a) | dr.zeros(jit.Bool, n) for _, _, _, a in rays]
+        sub = [(o, d, a) for (o, d, _, _), a in zip(rays, actives, strict=True)]
+
+        def step(ts, prims):
+            for block in self.blocks:
+                ts, prims = block.intersect_group(sub, ts, prims)
+            return tuple(ts), tuple(prims)
+
+        if all(a is True for _, _, _, a in rays):
+            ts, prims = step(ts, prims)
+        else:
+            ts, prims = self._once(any_mask(actives), step, (tuple(ts), tuple(prims)))
+        return [Hit(t, prim) for t, prim in zip(ts, prims, strict=True)]
+
+    def occluded_group(self, rays: list) -> list:
+        """:meth:`occluded` of K rays a lane (see :meth:`closest_hit_group`): a list of K
+        jit.Bool."""
+        if len(rays) == 1:
+            return [self.occluded(*rays[0])]
+        if not any(block.any_hit for block in self.blocks):
+            return [hit.valid for hit in self.closest_hit_group(rays)]
+        n = max(dr.width(x) for ray in rays for x in ray)
+        rays = [(o, d, jit.Float(tmax) + dr.zeros(jit.Float, n),
+                 jit.Bool(a) | dr.zeros(jit.Bool, n)) for o, d, tmax, a in rays]
+
+        def step(*blocked):
+            blocked = list(blocked)
+            for block in self.blocks:
+                more = block.occluded_group([(o, d, tmax, a & ~b) for (o, d, tmax, a), b
+                                             in zip(rays, blocked, strict=True)])
+                blocked = [b | m for b, m in zip(blocked, more, strict=True)]
+            return tuple(blocked)
+
+        # Inactive lanes keep False (the loop's condition).
+        return list(self._once(any_mask([a for *_, a in rays]), step,
+                               tuple(dr.zeros(jit.Bool, n) for _ in rays)))
 
     def _any(self, o, d, tmax, active):
         blocked = dr.zeros(jit.Bool, dr.width(tmax))

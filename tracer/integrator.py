@@ -54,6 +54,14 @@ level from every child batch at once (:func:`_compact`); the level's ray
 counts are summed on the device and read when the render ends. A batch
 carries only what cannot be recomputed (ray, weight, sample slot).
 
+In a scene with a triangle mesh, the camera level gives each lane K samples
+of one pixel (:data:`GROUP`, :attr:`Integrator.group`): the K rays walk the
+mesh's BVH together, reading each node once (:meth:`Geometry.closest_hit_group`),
+and so do their shadow rays to each light; the rest of the shading is done for
+each ray on its own, by the same operations, so the image and the ray counts
+are those of one ray a lane, exactly (``tests/test_packets.py``). The light of
+the K rays is put back in sample order after the level's kernel.
+
 In a scene with mirrors or glass and max_depth > 2, the ``stack`` schedule
 (:meth:`Integrator._render_stack`, the default there) traces the same rays
 in one kernel a chunk: each lane follows its sample's tree depth first, with
@@ -78,7 +86,7 @@ import drjit as dr
 import numpy as np
 
 from tracer import backend, faults, lights
-from tracer.backend import jit
+from tracer.backend import any_mask, jit
 from tracer.camera import generate_rays
 from tracer.emitters import area, scene_emitters
 from tracer.geometry import Geometry, Hit, spawn_offset
@@ -116,6 +124,15 @@ SCHEDULES = ("auto", "wavefront", "stack")
 #: at 232 MB; counted as 4, 0.26-0.29 s in 2 chunks, peaking at 407 MB (one chunk:
 #: 0.22 s, 440 MB; a throwaway script, peak resident memory of the process).
 SEEDS_PER_LANE_SAMPLE = 4
+
+#: Camera rays a lane (:attr:`Integrator.group`) where the scene has a mesh: the lane's
+#: rays walk the BVH as a packet, reading each node and triangle once for all of them
+#: (:meth:`tracer.bvh.BVH.closest_hit_group`). A lane's K rays are K consecutive
+#: samples of one pixel (K divides the samples of a pixel), so their walks nearly
+#: coincide. The render of ``benchmarks/bench_mesh.py``'s scene (144,000 triangles,
+#: 640x480, 16 spp; a throwaway script, medians of 7, two rounds): K = 1 249 ms,
+#: 2 190-197 ms, 4 177-185 ms, 8 186-188 ms.
+GROUP = 4
 
 
 @dataclass
@@ -231,18 +248,35 @@ class _Radiance:
     def __init__(self):
         self.value = None
         self._pending = None
+        self._parts = None   # the camera level's light, a part per ray of a lane
 
-    def add(self, contrib, slot) -> None:
-        if self.value is None:  # the camera level: slot = 0, 1, ..., n - 1
-            self.value = contrib + 0  # a variable of its own (contrib may be a literal)
+    def add(self, contribs: list, slots: list) -> None:
+        """Add a level's light: one contrib and slot array per batch of the level (the
+        camera level's K rays a lane are K batches, one a later level's)."""
+        if self.value is None and self._parts is None:  # the camera level: slots 0, .., n - 1
+            if len(contribs) == 1:  # in order
+                self.value = contribs[0] + 0  # a variable of its own (may be a literal)
+            else:  # lane j's K rays are the samples j K, ..., j K + K - 1
+                # Evaluated by the level's kernel, then put in slot order by commit() (a
+                # gather from them before that would evaluate each in a kernel of its own).
+                self._parts = [c + 0 for c in contribs]
         else:
+            (contrib,), (slot,) = contribs, slots
             self._pending = (contrib, slot)
 
     def outputs(self) -> tuple:
         """What the level's kernel must evaluate."""
-        return (self.value,) if self._pending is None else (self._pending[0],)
+        if self._pending is not None:
+            return (self._pending[0],)
+        return (self.value,) if self._parts is None else tuple(self._parts)
 
     def commit(self) -> None:
+        if self._parts is not None:
+            k = len(self._parts)
+            i = dr.arange(jit.UInt32, k * dr.width(self._parts[0]))
+            self.value = _own_child(self._parts, i % k, i // k)
+            self._parts = None
+            dr.eval(self.value)   # one kernel for the three channels
         if self._pending is not None:
             contrib, slot = self._pending
             self._pending = None
@@ -296,7 +330,7 @@ class Integrator:
 
     def __init__(self, scene: Scene, seed: int = 0, chunk_samples: int | None = None,
                  lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0,
-                 schedule: str = "auto"):
+                 schedule: str = "auto", group: int | None = None):
         backend.use()
         from tracer.limits import check_render
 
@@ -346,33 +380,46 @@ class Integrator:
         #: "wavefront" (a kernel a level, :meth:`_level`) or "stack" (a kernel a chunk,
         #: :meth:`_render_stack`)
         self.schedule = schedule
+        if group is None:
+            # Measured on the CPU only; a GPU (none was lent) keeps one ray a thread.
+            group = GROUP if self.geo.has_mesh and backend.name() == "llvm" else 1
+        if group < 1:
+            raise ValueError(f"group must be at least 1, not {group}")
+        #: Camera rays a lane in the wavefront schedule: the K samples of a pixel that a
+        #: lane traces together through a mesh's BVH (:meth:`Geometry.closest_hit_group`).
+        self.group = int(group)
 
     # ------------------------------------------------------------------ one level
 
-    def _level(self, b: _Batch, depth: int, L: _Radiance) -> tuple[_Batch | None, object]:
-        """Trace one level; add its light to L; return the next level and the level's tally.
+    def _level(self, bs: list, depth: int, L: _Radiance) -> tuple[_Batch | None, object]:
+        """Trace one level, the rays of a lane given as a list of batches (one, or the
+        camera level's K rays a lane, :attr:`Integrator.group`); add its light to L;
+        return the next level and the level's tally.
 
         The tally (a UInt64 array of one element, read when the render ends, so
         that no level waits for it) holds the shadow rays cast in its high 32 bits
         and the rays whose weight is significant in its low 32 bits.
         """
-        (contrib,), shadow_masks, children = self._shade(b, depth)   # one seed a lane
-        L.add(contrib, b.slot)
+        contribs, shadow_masks, children = self._shade(bs, depth)
+        L.add([c for c, in contribs], [b.slot for b in bs])   # one seed a lane
         # The level's statistics as one count per lane, summed without waiting for them:
         # the shadow rays cast (high 32 bits) and whether the ray mattered (low bit).
         # Camera rays all have weight 1, so all matter: their lanes count only shadow
         # rays, in 32 bits where the sum fits (half the memory of the 64-bit tally; on
         # three_lights, 800x480, 64 spp, the tally was about 6 % of the render).
-        n = b.size()
-        narrow = b.tmax is not None and len(shadow_masks) * n < (1 << 32)  # the camera's
+        n = bs[0].size()
+        masks = [m for ms in shadow_masks for m in ms]
+        narrow = bs[0].tmax is not None and len(masks) * n < (1 << 32)  # the camera's
         if narrow:
             tally = dr.zeros(jit.UInt32, n)
-            for m in shadow_masks:
+            for m in masks:
                 tally += dr.select(m, jit.UInt32(1), jit.UInt32(0))
         else:
-            tally = dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1),
-                              jit.UInt64(0))
-            for m in shadow_masks:
+            tally = dr.zeros(jit.UInt64, n)
+            for b in bs:
+                tally += dr.select(dr.max(b.weight) > SIGNIFICANT_WEIGHT, jit.UInt64(1),
+                                   jit.UInt64(0))
+            for m in masks:
                 tally += dr.select(m, jit.UInt64(1 << 32), jit.UInt64(0))
         # One kernel: intersection, shading, shadow rays and the next level's rays.
         dr.eval(*L.outputs(), tally, *(x for c, keep in children or ()
@@ -380,15 +427,21 @@ class Integrator:
                                        if x is not None))
         L.commit()
         total = dr.sum(tally)
-        if narrow:  # shadow rays in the high bits; all n rays matter
-            total = (jit.UInt64(total) << 32) | n
+        if narrow:  # shadow rays in the high bits; all rays matter
+            total = (jit.UInt64(total) << 32) | (n * len(bs))
         return (None if children is None else _compact(children)), total
 
-    def _shade(self, b: _Batch, depth, active=True, limit=None) -> tuple[list, list,
-                                                                         list | None]:
-        """The light a batch of rays finds, and the rays it spawns: (contribs, shadow masks,
-        children), contribs a list of one light per seed a lane carries
-        (:meth:`_Batch.sums`), children being (batch, keep) pairs or None.
+    def _shade(self, bs: list, depth, active=True, limit=None) -> tuple[list, list,
+                                                                        list | None]:
+        """The light a group of batches of rays finds, and the rays they spawn: (contribs,
+        shadow masks, children), each of the first two a list with an entry per batch:
+        contribs a list of one light per seed a lane carries (:meth:`_Batch.sums`), shadow
+        masks a list; children being (batch, keep) pairs (of all the batches) or None.
+
+        ``bs`` holds the K rays of each lane, as K batches of one width: the rays of
+        one lane are traced together, as a packet (:meth:`Geometry.closest_hit_group`),
+        and so are their shadow rays to each light; everything else is done for each
+        ray on its own, the same operations as with K = 1.
 
         A lane that carries several seeds (``b.shared``) shades once and samples each
         sampled light once per seed, adding each seed's light to its own sum; what no
@@ -397,23 +450,127 @@ class Integrator:
         adds.
 
         ``depth`` is the batch's level, an int (the wavefront: every ray at one level), or
-        a jit.UInt32 per ray (:meth:`_render_stack`: rays at many levels in one kernel),
-        where what an int decides for the whole batch becomes a mask per ray, against
-        ``limit``, max_depth as a jit.UInt32 (opaque, so that one kernel serves every
-        max_depth that :meth:`_render_stack` rounds to the same size). Rays outside
+        a jit.UInt32 per ray (:meth:`_render_stack`: rays at many levels in one kernel,
+        one batch), where what an int decides for the whole batch becomes a mask per ray,
+        against ``limit``, max_depth as a jit.UInt32 (opaque, so that one kernel serves
+        every max_depth that :meth:`_render_stack` rounds to the same size). Rays outside
         ``active`` are not traced.
         """
         scene, geo = self.scene, self.geo
         per_ray = not isinstance(depth, int)
         max_depth = limit if per_ray else scene.film.max_depth
-        hit: Hit = geo.closest_hit(b.o, b.d, dr.inf if b.tmax is None else b.tmax, active)
-        valid = hit.valid
-        surf = geo.surface(hit, b.o, b.d)
-        p, n, n_sh = surf.p, surf.n, surf.ns
-        cos_o = -dr.dot(n, b.d)              # > 0: the ray arrives on the front side
-        S = b.sums()
-        contrib = [dr.zeros(jit.Array3f, b.size()) for _ in range(S)]
+        hits = geo.closest_hit_group([(b.o, b.d, dr.inf if b.tmax is None else b.tmax,
+                                       active) for b in bs])
+        surfs = [geo.surface(hit, b.o, b.d) for hit, b in zip(hits, bs, strict=True)]
+        valids = tuple(hit.valid for hit in hits)
+        S = bs[0].sums()
+        contribs = [self._seen(b, hit, surf, depth, max_depth)
+                    for b, hit, surf in zip(bs, hits, surfs, strict=True)]
 
+        children = None
+        shadow_masks = [[] for _ in bs]
+        if per_ray or depth < max_depth:
+            # The shading of the rays that hit something. At the camera level of a scene
+            # without mirrors or glass it runs as a symbolic if, which a SIMD packet of
+            # rays that all missed (sky) skips: three_lights, where 29 % of the camera
+            # rays miss, 0.20 s to 0.18 s (800x480, 64 spp); phong_lobes and sphere_point
+            # 15 % faster at 320x240. With child rays to return, the if's merge of every
+            # output costs more than it saves (emitter_in_glass 8 % slower, tir_prisms
+            # 2.4x slower when later levels used it too), so there it runs unconditionally.
+            def shade(valids):
+                adds, masks, kids, points = [], [], [], []
+                for b, hit, surf, valid in zip(bs, hits, surfs, valids, strict=True):
+                    add, point = self._hit_point(b, hit, surf, valid, S)
+                    adds.append(add)
+                    points.append(point)
+                    masks.append([])
+                if self.materials.has_smooth:
+                    # The lights' samples of each ray, light after light; the K rays of
+                    # a lane cast their shadow rays to one light together.
+                    samples = [list(self._light_samples(b, depth)) for b in bs]
+                    for j in range(len(samples[0])):
+                        rays, rest = [], []
+                        for b, point, sample in zip(bs, points, samples, strict=True):
+                            light, u, _ = sample[j]
+                            ray, unblocked = self._shadow_ray(b, point, light, u)
+                            rays.append(ray)
+                            rest.append(unblocked)
+                        blocked = geo.occluded_group(rays)
+                        for i in range(len(bs)):
+                            k = samples[i][j][2]
+                            ray_active = rays[i][3]
+                            direct = dr.select(ray_active & ~blocked[i], rest[i], 0)
+                            adds[i] = [a + direct if m == k or k < 0 else a
+                                       for m, a in enumerate(adds[i])]
+                            masks[i].append(ray_active)
+                if self.materials.has_delta:
+                    for b, point in zip(bs, points, strict=True):
+                        si, mats, off = point[0], point[1], point[2]
+                        if per_ray:  # the rays of the last segment only where they can add
+                            kid = self._delta(b, mats, si, off)
+                            if not self.last_level_sees:
+                                kid = [(c, keep & (depth + 1 < max_depth)) for c, keep in kid]
+                            kids += kid
+                        elif depth + 1 < max_depth or self.last_level_sees:
+                            kids += self._delta(b, mats, si, off)
+                return (tuple(tuple(a) for a in adds), tuple(tuple(m) for m in masks),
+                        kids or None)
+
+            n_rays = (sum(1 if light.delta else S for light in self.illuminating)
+                      if self.materials.has_smooth else 0)   # shadow rays a hit casts
+
+            def unlit(m):  # the outputs of shade() where nothing is shaded
+                return (tuple(tuple(dr.zeros(jit.Array3f, m) for _ in range(S)) for _ in bs),
+                        tuple(tuple(dr.zeros(jit.Bool, m) for _ in range(n_rays)) for _ in bs))
+
+            b = bs[0]
+            if per_ray:
+                # In the stack's loop the if pays even with child rays: a SIMD packet whose
+                # rays all missed (or all ended) skips the shading and pops its next rays.
+                # Heckbert's scene at DEPTH 25: 113-115 to 127-128 M rays/s; at 320x240,
+                # 64 spp: whitted_1980 0.272-0.282 to 0.248-0.250 s, emitter_in_glass
+                # 0.289-0.296 to 0.255-0.261 s, glass_sphere 0.235 to 0.233 s (alternating
+                # runs, benchmarks/bench_scenes.py). Child batches pass through the if as
+                # flat fields.
+                if len(bs) != 1:
+                    raise ValueError("the stack schedule shades one ray a lane")
+                width = 4 + (self.dfa is not None)
+
+                def hit_fn(v):
+                    add, masks, kids = shade(v)
+                    return add, masks, tuple(x for c, keep in kids or () for x in (
+                        c.o, c.d, c.weight, keep, c.state) if x is not None)
+
+                def miss_fn(v):
+                    m = b.size()
+                    kid = [dr.zeros(jit.Array3f, m)] * 3 + [dr.zeros(jit.Bool, m)]
+                    kid += [dr.zeros(jit.UInt32, m)] if self.dfa is not None else []
+                    return (*unlit(m), tuple(kid * self.materials.delta_slots
+                                             if self.materials.has_delta else ()))
+
+                sh = valids[0] & (depth < max_depth)
+                add, masks, flat = dr.if_stmt(((sh,),), sh, hit_fn, miss_fn)
+                children = [(b.like([*flat[i:i + 3], b.slot,
+                                     flat[i + 4] if width == 5 else None]), flat[i + 3])
+                            for i in range(0, len(flat), width)]
+            elif b.tmax is not None and not self.materials.has_delta:
+                add, masks = dr.if_stmt((valids,), any_mask(valids), lambda v: shade(v)[:2],
+                                        lambda v: unlit(b.size()))
+            else:
+                add, masks, children = shade(valids)
+            contribs = [[c + a for c, a in zip(contrib, ad, strict=True)]
+                        for contrib, ad in zip(contribs, add, strict=True)]
+            shadow_masks = [list(m) for m in masks]
+        return contribs, shadow_masks, children
+
+    def _seen(self, b: _Batch, hit: Hit, surf, depth, max_depth) -> list:
+        """The light a batch's rays see directly, a list of one per sum a lane carries:
+        an area light's emission on its front side, the backgrounds where they miss."""
+        geo = self.geo
+        per_ray = not isinstance(depth, int)
+        valid = hit.valid
+        cos_o = -dr.dot(surf.n, b.d)              # > 0: the ray arrives on the front side
+        contrib = [dr.zeros(jit.Array3f, b.size()) for _ in range(b.sums())]
         if geo.emitters:
             le, seen = area.emitted(geo.radiance, hit.prim, cos_o, valid)
             if self.dfa is not None:  # the light is the path's L: ... E + L
@@ -433,117 +590,62 @@ class Integrator:
                         continue
                 term = dr.select(gate, b.weight * light.background(b.d), 0)
                 contrib = [c + term for c in contrib]
+        return contrib
 
-        children = None
-        shadow_masks = []
-        if per_ray or depth < max_depth:
-            # The shading of the rays that hit something. At the camera level of a scene
-            # without mirrors or glass it runs as a symbolic if, which a SIMD packet of
-            # rays that all missed (sky) skips: three_lights, where 29 % of the camera
-            # rays miss, 0.20 s to 0.18 s (800x480, 64 spp); phong_lobes and sphere_point
-            # 15 % faster at 320x240. With child rays to return, the if's merge of every
-            # output costs more than it saves (emitter_in_glass 8 % slower, tir_prisms
-            # 2.4x slower when later levels used it too), so there it runs unconditionally.
-            def shade(valid):
-                add = [dr.zeros(jit.Array3f, b.size()) for _ in range(S)]
-                masks = []
-                kids = None
-                mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, valid)
-                # Two-sided: shading happens on the side the ray arrives from (judged, as
-                # Mitsuba's twosided BSDF does, by the shading normal); ray origins move off
-                # the surface along the geometric normal.
-                cos_sh = -dr.dot(n_sh, b.d)
-                nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
-                if faults.on("backface-not-flipped"):
-                    nl = n_sh
-                ng = dr.select(cos_o >= 0, n, -n)
-                off = spawn_offset(p)
-                if self.offset_scale != 1.0:
-                    off = off * self.offset_scale
-                p_front = dr.fma(ng, off, p)
-                si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
-                mats = self.materials.at(mid, si, valid)
-                lit = mats.smooth
-                if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
-                    # Not &=: Dr.Jit updates in place, and lit may be a kind's own lane mask.
-                    lit = lit & self._accepts(self._steps(b.state, "DL"))
-                for mask, value, letters in mats.emission():
-                    gate = mask
-                    if self.dfa is not None:
-                        gate = gate & self._accepts(self._steps(b.state, letters))
-                    term = dr.select(gate, b.weight * value, 0)
-                    add = [a + term for a in add]
-                if self.materials.has_smooth:
-                    for light, u, k in self._light_samples(b, depth):
-                        wi, dist, e = light.sample(p, p_front, u)
-                        cos = lights.lambert_cosine(nl, wi)
-                        f = mats.eval(wi)
-                        active = lit & (cos > 0) & (dr.max(e) > 0)
-                        # Leave the surface on the side the shadow ray goes to (as Mitsuba's
-                        # spawn_ray_to does): with interpolated normals a lit direction can lie
-                        # behind the geometric surface near a shadow terminator.
-                        origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
-                        if faults.on("shadow-acne"):
-                            origin = p   # no offset: the shadow ray may hit its own surface
-                        d_shadow, length = light.shadow_ray(p, origin, wi, dist)
-                        tmax = length * (1 - SHADOW_EPSILON)
-                        if faults.on("shadow-ray-past-light"):
-                            tmax = dr.full(jit.Float, dr.inf, dr.width(p))
-                        blocked = geo.occluded(origin, d_shadow, tmax, active)
-                        direct = dr.select(active & ~blocked, b.weight * f * e * cos, 0)
-                        add = [a + direct if j == k or k < 0 else a for j, a in enumerate(add)]
-                        masks.append(active)
-                if self.materials.has_delta:
-                    if per_ray:  # the rays of the last segment only where they can add light
-                        kids = self._delta(b, mats, si, off)
-                        if not self.last_level_sees:
-                            kids = [(c, keep & (depth + 1 < max_depth)) for c, keep in kids]
-                    elif depth + 1 < max_depth or self.last_level_sees:
-                        kids = self._delta(b, mats, si, off)
-                return tuple(add), tuple(masks), kids
+    def _hit_point(self, b: _Batch, hit: Hit, surf, valid, S: int) -> tuple:
+        """At each valid hit: (the emission of its material, a list of one per sum, and
+        the point: (si, mats, off, p_front, lit)) for the lights and the delta lobes."""
+        geo = self.geo
+        p, n, n_sh = surf.p, surf.n, surf.ns
+        cos_o = -dr.dot(n, b.d)
+        add = [dr.zeros(jit.Array3f, b.size()) for _ in range(S)]
+        mid = dr.gather(jit.UInt32, geo.material_id, hit.prim, valid)
+        # Two-sided: shading happens on the side the ray arrives from (judged, as
+        # Mitsuba's twosided BSDF does, by the shading normal); ray origins move off
+        # the surface along the geometric normal.
+        cos_sh = -dr.dot(n_sh, b.d)
+        nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
+        if faults.on("backface-not-flipped"):
+            nl = n_sh
+        ng = dr.select(cos_o >= 0, n, -n)
+        off = spawn_offset(p)
+        if self.offset_scale != 1.0:
+            off = off * self.offset_scale
+        p_front = dr.fma(ng, off, p)
+        si = ShadingPoint(p, n, n_sh, surf.uv, b.d, nl, ng, cos_sh)
+        mats = self.materials.at(mid, si, valid)
+        lit = mats.smooth
+        if self.dfa is not None:  # light at a diffuse vertex: ... E + D + L
+            # Not &=: Dr.Jit updates in place, and lit may be a kind's own lane mask.
+            lit = lit & self._accepts(self._steps(b.state, "DL"))
+        for mask, value, letters in mats.emission():
+            gate = mask
+            if self.dfa is not None:
+                gate = gate & self._accepts(self._steps(b.state, letters))
+            term = dr.select(gate, b.weight * value, 0)
+            add = [a + term for a in add]
+        return add, (si, mats, off, p_front, lit)
 
-            n_rays = (sum(1 if light.delta else S for light in self.illuminating)
-                      if self.materials.has_smooth else 0)   # shadow rays a hit casts
-
-            def unlit(m):  # the outputs of shade() where nothing is shaded
-                return (tuple(dr.zeros(jit.Array3f, m) for _ in range(S)),
-                        tuple(dr.zeros(jit.Bool, m) for _ in range(n_rays)))
-
-            if per_ray:
-                # In the stack's loop the if pays even with child rays: a SIMD packet whose
-                # rays all missed (or all ended) skips the shading and pops its next rays.
-                # Heckbert's scene at DEPTH 25: 113-115 to 127-128 M rays/s; at 320x240,
-                # 64 spp: whitted_1980 0.272-0.282 to 0.248-0.250 s, emitter_in_glass
-                # 0.289-0.296 to 0.255-0.261 s, glass_sphere 0.235 to 0.233 s (alternating
-                # runs, benchmarks/bench_scenes.py). Child batches pass through the if as
-                # flat fields.
-                width = 4 + (self.dfa is not None)
-
-                def hit_fn(v):
-                    add, masks, kids = shade(v)
-                    return add, masks, tuple(x for c, keep in kids or () for x in (
-                        c.o, c.d, c.weight, keep, c.state) if x is not None)
-
-                def miss_fn(v):
-                    m = b.size()
-                    kid = [dr.zeros(jit.Array3f, m)] * 3 + [dr.zeros(jit.Bool, m)]
-                    kid += [dr.zeros(jit.UInt32, m)] if self.dfa is not None else []
-                    return (*unlit(m), tuple(kid * self.materials.delta_slots
-                                             if self.materials.has_delta else ()))
-
-                sh = valid & (depth < max_depth)
-                add, masks, flat = dr.if_stmt((sh,), sh, hit_fn, miss_fn)
-                children = [(b.like([*flat[i:i + 3], b.slot,
-                                     flat[i + 4] if width == 5 else None]), flat[i + 3])
-                            for i in range(0, len(flat), width)]
-            elif b.tmax is not None and not self.materials.has_delta:
-                add, masks = dr.if_stmt((valid,), valid, lambda v: shade(v)[:2],
-                                        lambda v: unlit(b.size()))
-            else:
-                add, masks, children = shade(valid)
-            contrib = [c + a for c, a in zip(contrib, add, strict=True)]
-            shadow_masks = list(masks)
-        return contrib, shadow_masks, children
+    def _shadow_ray(self, b: _Batch, point, light, u) -> tuple:
+        """A hit's shadow ray to one light, (o, d, tmax, active), and the light it brings
+        where nothing blocks it (lecture 1, "The illumination equation")."""
+        si, mats, off, p_front, lit = point
+        p, n, nl = si.p, si.n, si.nl
+        wi, dist, e = light.sample(p, p_front, u)
+        cos = lights.lambert_cosine(nl, wi)
+        f = mats.eval(wi)
+        active = lit & (cos > 0) & (dr.max(e) > 0)
+        # Leave the surface on the side the shadow ray goes to (as Mitsuba's
+        # spawn_ray_to does): with interpolated normals a lit direction can lie
+        # behind the geometric surface near a shadow terminator.
+        origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
+        if faults.on("shadow-acne"):
+            origin = p   # no offset: the shadow ray may hit its own surface
+        d_shadow, length = light.shadow_ray(p, origin, wi, dist)
+        tmax = length * (1 - SHADOW_EPSILON)
+        if faults.on("shadow-ray-past-light"):
+            tmax = dr.full(jit.Float, dr.inf, dr.width(p))
+        return (origin, d_shadow, tmax, active), b.weight * f * e * cos
 
     def _light_samples(self, b: _Batch, depth):
         """(light, sample, which sum) for each shadow ray a hit casts, in the lights'
@@ -607,7 +709,7 @@ class Integrator:
         def body(alive, sp, depth, tmax, o, d, w, st, L, pend_f, pend_u, counts):
             cur = b.like([o, d, w, b.slot, st if dfa else None])
             cur.tmax = tmax
-            contrib, masks, kids = self._shade(cur, depth, alive, limit)
+            (contrib,), (masks,), kids = self._shade([cur], depth, alive, limit)
             L = tuple(x + dr.select(alive, c, 0) for x, c in zip(L, contrib, strict=True))
             base = (depth - 1) * 3
             sig = dr.select(dr.max(w) > SIGNIFICANT_WEIGHT, one, zero)
@@ -736,6 +838,31 @@ class Integrator:
         return (len(seeds) > 1 and self.schedule == "stack" and not self.scene.film.jitter
                 and self.dfa is None)
 
+    def _camera_batch(self, first: int, count: int, seeds: tuple, shared: bool, idx,
+                      width: int) -> tuple:
+        """(film x, film y, the batch) of the camera rays ``idx`` (a jit.UInt32; None: all
+        of them, in order) of the chunk of ``count`` pixels from pixel ``first``."""
+        scene = self.scene
+        W, H = scene.film.width, scene.film.height
+        n = scene.film.strata
+        S = len(seeds)
+        if S > 1 and not shared:
+            pixel, s, fx, fy, k = pixel_samples(W, n, first, count, S, idx=idx)
+            seed = dr.gather(jit.UInt32, jit.UInt32(list(seeds)), k)
+        else:
+            pixel, s, fx, fy = pixel_samples(W, n, first, count, idx=idx)
+            seed = seeds[0]
+        if scene.film.jitter:  # a uniform position inside each stratum
+            u = jitter_2d(pixel, s, seed)
+            fx, fy = fx + (u.x - 0.5) * (1.0 / n), fy + (u.y - 0.5) * (1.0 / n)
+        o, d, tmax = generate_rays(scene.camera, W, H, fx, fy)
+        slot = dr.arange(jit.UInt32, width) if idx is None else idx
+        state = None
+        if self.dfa is not None:  # every path ends at the eye: read E first
+            state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), width)
+        return fx, fy, _Batch(o, d, dr.full(jit.Array3f, 1.0, width), slot, state, first,
+                              n * n, tmax, seeds, shared)
+
     def _render(self, seeds: tuple, progress, moments: bool) -> list[RenderResult]:
         """:meth:`render` (one seed) or :meth:`render_seeds` (two or more, box filter):
         a result per seed."""
@@ -763,37 +890,30 @@ class Integrator:
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
             lanes = count * spp * (1 if shared else S)
-            if S > 1 and not shared:
-                pixel, s, fx, fy, k = pixel_samples(W, n, first, count, S)
-                seed = dr.gather(jit.UInt32, jit.UInt32(list(seeds)), k)
-            else:
-                pixel, s, fx, fy = pixel_samples(W, n, first, count)
-                seed = seeds[0]
-            if scene.film.jitter:  # a uniform position inside each stratum
-                u = jitter_2d(pixel, s, seed)
-                fx, fy = fx + (u.x - 0.5) * (1.0 / n), fy + (u.y - 0.5) * (1.0 / n)
-            o, d, tmax = generate_rays(scene.camera, W, H, fx, fy)
+
+            fx, fy, camera = self._camera_batch(first, count, seeds, shared, None, lanes)
             radiance = _Radiance()
-            slot = dr.arange(jit.UInt32, lanes)
-            ones = dr.full(jit.Array3f, 1.0, lanes)
-            state = None
-            if self.dfa is not None:  # every path ends at the eye: read E first
-                state = dr.full(jit.UInt32, self.dfa.step(self.dfa.start, "E"), lanes)
-            camera = _Batch(o, d, ones, slot, state, first, spp, tmax, seeds, shared)
             if self.schedule == "stack":
                 sums_of_light, sums = self._render_stack(camera)
                 radiance.value = sums_of_light if shared else sums_of_light[0]
                 counts.append(sums)
             else:
-                stack = [(1, camera)]
+                # The camera level with K rays a lane: lane j holds samples j K to
+                # j K + K - 1, of one pixel where K divides spp.
+                K = self.group if lanes % self.group == 0 else 1
+                cameras = [camera] if K == 1 else [
+                    self._camera_batch(first, count, seeds, shared,
+                                       dr.arange(jit.UInt32, lanes // K) * K + k, lanes // K)[2]
+                    for k in range(K)]
+                stack = [(1, cameras)]
                 while stack:
-                    depth, batch = stack.pop()
-                    rays[depth - 1] += batch.size()
-                    nxt, tally = self._level(batch, depth, radiance)
+                    depth, batches = stack.pop()
+                    rays[depth - 1] += sum(b.size() for b in batches)
+                    nxt, tally = self._level(batches, depth, radiance)
                     tallies[depth - 1].append(tally)
                     if nxt is not None and depth < max_depth:
                         for part in reversed(nxt.split(self.chunk_samples)):
-                            stack.append((depth + 1, part))
+                            stack.append((depth + 1, [part]))
             if splat is not None:
                 splat.add(radiance.value, fx, fy, first, count, spp)
             else:

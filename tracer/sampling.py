@@ -72,16 +72,19 @@ def pixel_seed_and_sample(idx, spp: int, seeds: int, first_pixel: int):
     return local_pixel + dr.opaque(jit.UInt32, first_pixel), rest - k * spp, k
 
 
-def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int, seeds: int = 1):
+def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int, seeds: int = 1,
+                  idx=None):
     """(global pixel index, sample index within the pixel, film x, film y) for a range of pixels.
 
     Samples are ordered pixel by pixel, ``n * n`` consecutive samples per pixel,
     so a per-pixel mean is a block reduction. With ``seeds`` > 1 each pixel holds
     that many such runs of samples at the same positions, and a fifth value is each
-    sample's seed index (:func:`pixel_seed_and_sample`).
+    sample's seed index (:func:`pixel_seed_and_sample`). ``idx`` (a jit.UInt32)
+    picks some of the range's samples by their index in it; by default all.
     """
     spp = n * n
-    idx = dr.arange(jit.UInt32, pixel_count * spp * seeds)
+    if idx is None:
+        idx = dr.arange(jit.UInt32, pixel_count * spp * seeds)
     if seeds == 1:
         pixel, s = pixel_and_sample(idx, spp, first_pixel)
     else:
