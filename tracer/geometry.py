@@ -393,9 +393,8 @@ class _MeshBlock(_Block):
             self.vt = upload_rows(jit.Array2f, mesh.uvs)
 
     def intersect(self, o, d, t, prim, active):
-        ti, tri, _, _ = self.bvh.closest_hit(o, d, t, active)
-        hit = tri != INVALID
-        return self._update(ti, hit, tri, t, prim)
+        (t,), (prim,) = self.intersect_group([(o, d, active)], [t], [prim])
+        return t, prim
 
     any_hit = True
 
@@ -403,10 +402,6 @@ class _MeshBlock(_Block):
         return self.bvh.occluded(o, d, tmax, active)
 
     def intersect_group(self, rays, ts, prims):
-        if len(rays) == 1:
-            (o, d, a), = rays
-            t, prim = self.intersect(o, d, ts[0], prims[0], a)
-            return [t], [prim]
         found = self.bvh.closest_hit_group([(o, d, t, a) for (o, d, a), t
                                             in zip(rays, ts, strict=True)])
         out = [self._update(ti, tri != INVALID, tri, t, prim)
@@ -696,14 +691,7 @@ class Geometry:
         ``d`` must be a unit vector. Loops run per SIMD packet while any lane is
         active, so a packet of rays that need no test costs almost nothing.
         """
-        n = dr.width(o)
-        t = jit.Float(tmax) + dr.zeros(jit.Float, n)
-        prim = dr.full(jit.UInt32, INVALID, n)
-        if active is True:
-            return Hit(*self._all(o, d, t, prim, jit.Bool(True)))
-        active = jit.Bool(active) | dr.zeros(jit.Bool, n)
-        return Hit(*self._once(active, lambda t, prim: self._all(o, d, t, prim, active),
-                               (t, prim)))
+        return self.closest_hit_group([(o, d, tmax, active)])[0]
 
     def occluded(self, o, d, tmax, active=True):
         """True where something blocks the segment from o along d shorter than tmax.
@@ -715,18 +703,7 @@ class Geometry:
         knot (``benchmarks/bench_mesh.py``) the shadow rays' any-hit took the render
         from 0.346 to 0.318 s.
         """
-        if not any(block.any_hit for block in self.blocks):
-            # Without a block that can stop early, the closest hit is as fast (slightly
-            # faster on three_lights, 0.042-0.044 s against 0.046-0.047 s at 320x240).
-            return self.closest_hit(o, d, tmax, active).valid
-        n = dr.width(o)
-        tmax = jit.Float(tmax) + dr.zeros(jit.Float, n)
-        if active is True:
-            return self._any(o, d, tmax, dr.full(jit.Bool, True, n))
-        active = jit.Bool(active) | dr.zeros(jit.Bool, n)
-        # Inactive lanes keep False (the loop's condition).
-        return self._once(active, lambda blocked: (self._any(o, d, tmax, active),),
-                          (dr.zeros(jit.Bool, n),))[0]
+        return self.occluded_group([(o, d, tmax, active)])[0]
 
     def closest_hit_group(self, rays: list) -> list:
         """:meth:`closest_hit` of K rays a lane: ``rays`` a list of K (o, d, tmax, active)
@@ -734,12 +711,12 @@ class Geometry:
         the K rays of a lane together (:meth:`tracer.bvh.BVH.closest_hit_group`), so the
         rays of a lane should be alike (samples of one pixel); the hits are those of
         :meth:`closest_hit` for each ray."""
-        if len(rays) == 1:
-            return [self.closest_hit(*rays[0])]
         n = max(dr.width(x) for ray in rays for x in ray)
-        ts = [jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays]
-        prims = [dr.full(jit.UInt32, INVALID, n) for _ in rays]
-        actives = [jit.Bool(a) | dr.zeros(jit.Bool, n) for _, _, _, a in rays]
+        ts = tuple(jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays)
+        prims = tuple(dr.full(jit.UInt32, INVALID, n) for _ in rays)
+        every = all(a is True for *_, a in rays)
+        actives = [jit.Bool(True) if every else jit.Bool(a) | dr.zeros(jit.Bool, n)
+                   for *_, a in rays]
         sub = [(o, d, a) for (o, d, _, _), a in zip(rays, actives, strict=True)]
 
         def step(ts, prims):
@@ -747,22 +724,24 @@ class Geometry:
                 ts, prims = block.intersect_group(sub, ts, prims)
             return tuple(ts), tuple(prims)
 
-        if all(a is True for _, _, _, a in rays):
+        if every:
             ts, prims = step(ts, prims)
         else:
-            ts, prims = self._once(any_mask(actives), step, (tuple(ts), tuple(prims)))
+            ts, prims = self._once(any_mask(actives), step, (ts, prims))
         return [Hit(t, prim) for t, prim in zip(ts, prims, strict=True)]
 
     def occluded_group(self, rays: list) -> list:
         """:meth:`occluded` of K rays a lane (see :meth:`closest_hit_group`): a list of K
         jit.Bool."""
-        if len(rays) == 1:
-            return [self.occluded(*rays[0])]
         if not any(block.any_hit for block in self.blocks):
+            # Without a block that can stop early, the closest hit is as fast (slightly
+            # faster on three_lights, 0.042-0.044 s against 0.046-0.047 s at 320x240).
             return [hit.valid for hit in self.closest_hit_group(rays)]
         n = max(dr.width(x) for ray in rays for x in ray)
+        every = all(a is True for *_, a in rays)
         rays = [(o, d, jit.Float(tmax) + dr.zeros(jit.Float, n),
-                 jit.Bool(a) | dr.zeros(jit.Bool, n)) for o, d, tmax, a in rays]
+                 dr.full(jit.Bool, True, n) if every else jit.Bool(a) | dr.zeros(jit.Bool, n))
+                for o, d, tmax, a in rays]
 
         def step(*blocked):
             blocked = list(blocked)
@@ -772,15 +751,11 @@ class Geometry:
                 blocked = [b | m for b, m in zip(blocked, more, strict=True)]
             return tuple(blocked)
 
+        none = tuple(dr.zeros(jit.Bool, n) for _ in rays)
+        if every:
+            return list(step(*none))
         # Inactive lanes keep False (the loop's condition).
-        return list(self._once(any_mask([a for *_, a in rays]), step,
-                               tuple(dr.zeros(jit.Bool, n) for _ in rays)))
-
-    def _any(self, o, d, tmax, active):
-        blocked = dr.zeros(jit.Bool, dr.width(tmax))
-        for block in self.blocks:
-            blocked = blocked | block.occluded(o, d, tmax, active & ~blocked)
-        return blocked
+        return list(self._once(any_mask([a for *_, a in rays]), step, none))
 
     @staticmethod
     @backend.syntax
@@ -792,11 +767,6 @@ class Geometry:
             state = step(*state)
             todo = jit.Bool(False)
         return state
-
-    def _all(self, o, d, t, prim, active):
-        for block in self.blocks:
-            t, prim = block.intersect(o, d, t, prim, active)
-        return t, prim
 
     def surface(self, hit: Hit, o, d) -> Surface:
         """The hit record: position, geometric and shading normals, uv of each valid hit."""
