@@ -248,11 +248,11 @@ CATALOG: tuple[Mutant, ...] = (
        "The ray-sphere test always takes the smaller root, so a ray starting inside "
        "misses the sphere.",
        "t = t0", "t = t0 if t0 > 0 else t1",
-       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: intersect"),
+       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: nearest_fraction"),
     _m("sphere-half-b-discriminant",
        "The discriminant of the half-b quadratic keeps the full form's 4.",
        "disc = b'^2 - 4 a c with b' = d . (o - c)", "disc = b'^2 - a c",
-       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: roots"),
+       L1, "Ray-sphere intersection", "tracer/shapes/sphere.py: quadratic"),
     _m("plane-hit-behind-ray",
        "The ray-plane test keeps intersections behind the ray's origin.",
        "hit = |a| <= 1 and |b| <= 1", "hit = t > 0 and |a| <= 1 and |b| <= 1",

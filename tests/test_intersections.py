@@ -121,3 +121,133 @@ def test_ray_triangle_outside_barycentric_range_misses(jit):
 def test_triangle_face_normal_follows_counter_clockwise_order(jit):
     n = triangle.normal(v3(jit, (1, 0, 0)), v3(jit, (0, 1, 0)))
     assert np.allclose(np.asarray(n).ravel(), [0, 0, 1])
+
+
+# --- the sphere tests without a division: occludes (shadow rays) and nearest_fraction ------
+
+
+def _sphere_rays(n: int, seed: int):
+    """Unit rays about a sphere of radius 1.5 at (0.3, -0.2, 0.1): origins outside, inside,
+    on the surface moved off it by a spawn offset to either side, and tangent; a third
+    of them aimed at the sphere. Float32 numpy arrays (o, d, centre, radius)."""
+    rng = np.random.default_rng(seed)
+    centre, radius = np.array([0.3, -0.2, 0.1], np.float32), np.float32(1.5)
+    kind = rng.integers(0, 4, n)
+    u = rng.normal(size=(n, 3))
+    u /= np.linalg.norm(u, axis=1, keepdims=True)
+    dist = np.where(kind == 0, rng.uniform(1.6, 20, n),             # outside
+                    np.where(kind == 1, rng.uniform(0, 1.4, n),      # inside
+                             1.5 * (1 + rng.choice([-1, 1], n) * 1500 * 2.0 ** -24 * 3)))
+    o = centre + u * dist[:, None]
+    d = rng.normal(size=(n, 3))
+    aim = rng.random(n) < 1 / 3
+    d[aim] = (centre + rng.normal(scale=0.8, size=(aim.sum(), 3))) - o[aim]
+    tangent = kind == 3   # d perpendicular to the radius through o: grazing
+    w = np.cross(u[tangent], rng.normal(size=(tangent.sum(), 3)))
+    d[tangent] = w
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    return o.astype(np.float32), d.astype(np.float32), centre, radius
+
+
+def _vec(jit, a):
+    return jit.Array3f(a[:, 0], a[:, 1], a[:, 2])
+
+
+@pytest.mark.parametrize("seed", [7, 8])
+def test_occludes_answers_as_the_nearest_hit_does(jit, seed):
+    # The shadow rays' test (no division, no square root) must say "blocked" exactly where
+    # intersect() finds a root in (0, tmax), for tmax infinite, far, and close to a root.
+    # It may differ only where a root lies within rounding of tmax (documented in
+    # occludes): such rays are left out, with a margin of 1e-5 relative, far above float32
+    # rounding (6e-8) and far below the shadow rays' own 1e-3 (SHADOW_EPSILON).
+    o, d, centre, radius = _sphere_rays(60_000, seed=seed)
+    c, r = jit.Array3f(*(float(x) for x in centre)), jit.Float(float(radius))
+    t_all, _ = sphere.intersect(_vec(jit, o), _vec(jit, d), c, r, jit.Float(math.inf))
+    t_all = np.asarray(t_all.numpy(), np.float64)
+    rng = np.random.default_rng(3)
+    choices = [np.full(len(o), np.inf), rng.uniform(0.01, 30, len(o)),
+               np.where(np.isfinite(t_all) & (t_all > 0),
+                        t_all * (1 + rng.choice([-1, 1], len(o)) * 1e-3), 1.0)]
+    for tmax in choices:
+        tmax = tmax.astype(np.float32)
+        _, hit = sphere.intersect(_vec(jit, o), _vec(jit, d), c, r, jit.Float(tmax))
+        blocked = sphere.occludes(_vec(jit, o), _vec(jit, d), c, r, jit.Float(tmax))
+        t0, t1, real = (np.asarray(x.numpy(), np.float64) for x in
+                        sphere.roots(_vec(jit, o), _vec(jit, d), c, r, unit=True))
+        near_tmax = real.astype(bool) & np.isfinite(tmax) & ((np.abs(t0 - tmax) <= 1e-5 * tmax) |
+                                         (np.abs(t1 - tmax) <= 1e-5 * tmax))
+        hit, blocked = hit.numpy(), blocked.numpy()
+        assert hit.any() and (~hit).any()
+        assert np.array_equal(hit[~near_tmax], blocked[~near_tmax])
+        assert near_tmax.mean() < 0.01
+
+
+def test_nearest_fraction_is_the_nearest_positive_of_both_roots(jit):
+    # intersect() (and a block of spheres) take the root nearest_fraction picks by signs,
+    # never comparing two quotients: it must be the lecture's rule applied to both roots
+    # of roots(), t0 if t0 > 0 else t1, to the bit, on rays from outside, inside, near the
+    # surface and grazing. Where the two roots are equal within rounding (tangent rays)
+    # either is right, and those rays are left out.
+    o, d, centre, radius = _sphere_rays(60_000, seed=11)
+    c, r = jit.Array3f(*(float(x) for x in centre)), jit.Float(float(radius))
+    t0, t1, real = (x.numpy() for x in sphere.roots(_vec(jit, o), _vec(jit, d), c, r,
+                                                     unit=True))
+    want = np.where(t0 > 0, t0, t1)
+    want_hit = real & (want > 0)
+    num, den, found = sphere.nearest_fraction(_vec(jit, o), _vec(jit, d), c, r)
+    t, hit = sphere.intersect(_vec(jit, o), _vec(jit, d), c, r, jit.Float(math.inf))
+    found, hit = found.numpy(), hit.numpy()
+    assert want_hit.mean() > 0.3 and (~want_hit).any()
+    assert np.array_equal(found, want_hit) and np.array_equal(hit, want_hit)
+    assert (den.numpy() > 0).all()
+    apart = want_hit & (np.abs(t1 - t0) > 1e-6 * np.abs(t1))
+    assert apart.mean() > 0.25
+    assert np.array_equal((num / den).numpy()[apart], want[apart])
+    assert np.array_equal(t.numpy()[apart], want[apart])
+
+
+@pytest.mark.parametrize("count", [8, 20])
+def test_spheres_nearest_hit_and_occlusion_against_each_sphere_alone(jit, count):
+    # Overlapping spheres in one block: the block's nearest hit must be the nearest of each
+    # sphere's own intersect(), and the shadow test blocked where that nearest hit lies
+    # before tmax. 8 spheres are written into the kernel (roots compared as fractions, one
+    # division), 20 are looped over (more than tracer.geometry.UNROLL).
+    from tracer.geometry import UNROLL
+
+    assert (count > UNROLL) == (count == 20)
+    from tracer.geometry import _SphereBlock
+    from tracer.scene import Sphere
+
+    rng = np.random.default_rng(5)
+    centres = rng.uniform(-2, 2, size=(count, 3))
+    radii = rng.uniform(0.4, 1.2, count)
+    block = _SphereBlock([Sphere(material="m", center=tuple(map(float, p)), radius=float(q))
+                          for p, q in zip(centres, radii, strict=True)])
+    n = 40_000
+    o = rng.uniform(-4, 4, size=(n, 3)).astype(np.float32)
+    d = rng.normal(size=(n, 3))
+    d[: n // 2] = rng.uniform(-2, 2, size=(n // 2, 3)) - o[: n // 2]   # half aimed inside
+    d = (d / np.linalg.norm(d, axis=1, keepdims=True)).astype(np.float32)
+    tmax = rng.uniform(0.1, 8, n).astype(np.float32)
+    each = []
+    for p, q in zip(centres, radii, strict=True):
+        ti, hi = sphere.intersect(_vec(jit, o), _vec(jit, d),
+                                  jit.Array3f(*(float(x) for x in p)), jit.Float(float(q)),
+                                  jit.Float(math.inf))
+        each.append(np.where(hi.numpy(), ti.numpy(), np.inf))
+    each = np.array(each)
+    nearest, which = each.min(axis=0), each.argmin(axis=0)
+    every = jit.Bool(np.ones(n, bool))
+    t, prim = block.intersect(_vec(jit, o), _vec(jit, d), jit.Float(np.full(n, np.inf)),
+                              jit.UInt32(np.full(n, 0xFFFFFFFF, np.uint32)), every)
+    t, prim = t.numpy(), prim.numpy()
+    hit = np.isfinite(nearest)
+    assert 0.2 < hit.mean() < 0.9
+    assert np.array_equal(prim != 0xFFFFFFFF, hit)
+    second = np.sort(each, axis=0)[1]
+    clear = hit & (second > nearest * (1 + 1e-6))   # no other sphere within rounding
+    assert np.array_equal(prim[clear], which[clear])
+    assert np.array_equal(t[clear], nearest[clear])
+    blocked = block.occluded(_vec(jit, o), _vec(jit, d), jit.Float(tmax), every).numpy()
+    sure = np.abs(nearest - tmax) > 1e-5 * tmax
+    assert np.array_equal(blocked[sure], (nearest < tmax)[sure])

@@ -212,6 +212,45 @@ class _SphereBlock(_TableBlock):
     def test(self, o, d, t, i):
         return sphere_f.intersect(o, d, self.get("c", i), self.get("r", i), t)
 
+    def _unrolled(self, o, d, t, prim):
+        """The nearest sphere, the roots compared as fractions and the nearest divided
+        once (:func:`tracer.shapes.sphere.nearest_fraction`): one division a ray, not
+        one a sphere (a vector division and a square root each take the one divider
+        unit for many cycles). t is :meth:`test`'s for the sphere found, and that
+        sphere is :meth:`test`'s but where two spheres' roots are within rounding of
+        each other."""
+        num, den = t, jit.Float(1.0)
+        for i in range(self.count):
+            n_i, d_i, hit = sphere_f.nearest_fraction(o, d, self.get("c", i),
+                                                      self.get("r", i))
+            closer = hit & (n_i * den < num * d_i)   # n_i / d_i < num / den, dens > 0
+            num = dr.select(closer, n_i, num)
+            den = dr.select(closer, d_i, den)
+            prim = dr.select(closer, i + self.base, prim)
+        return num / den, prim
+
+    any_hit = True
+
+    def occluded(self, o, d, tmax, active):
+        """Any sphere with a root in (0, tmax) (:func:`tracer.shapes.sphere.occludes`: no
+        division); many spheres in a loop that stops at the first."""
+        if self.count > UNROLL:
+            return self._occluded_looped(o, d, tmax, active)
+        hit = dr.zeros(jit.Bool, dr.width(tmax))
+        for i in range(self.count):
+            hit |= sphere_f.occludes(o, d, self.get("c", i), self.get("r", i), tmax)
+        return hit
+
+    @backend.syntax
+    def _occluded_looped(self, o, d, tmax, active):
+        i = jit.UInt32(0)
+        hit = dr.zeros(jit.Bool, dr.width(tmax))
+        count = dr.opaque(jit.UInt32, self.count)
+        while active & ~hit & (i < count):
+            hit = sphere_f.occludes(o, d, self.get("c", i), self.get("r", i), tmax)
+            i += 1
+        return hit
+
     def surface(self, k, o, d, t, mask):
         c = self.get("c", k, mask)
         r = self.get("r", k, mask)
