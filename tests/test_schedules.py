@@ -22,6 +22,9 @@ from tracer.integrator import SCHEDULES, Integrator
 CASES = [
     ("glass_sphere", None, {}),
     ("glass_sphere", None, {"lpe": "L.*E"}),
+    # a path of exactly two specular vertices: a ray popped from the stack must go on
+    # with its own DFA state, not with the state of the ray traced before it
+    ("whitted_1980", None, {"lpe": "LDSSE"}),
     ("masked", 6, {}),
     ("thin_glass", None, {}),
     ("whitted_mix", None, {}),
