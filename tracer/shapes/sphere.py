@@ -21,7 +21,8 @@ from tracer import faults
 
 def quadratic(o, d, center, radius):
     """(b', c, disc) of the ray-sphere quadratic t^2 + 2 b' t + c = 0 for |d| = 1 (a = 1),
-    the discriminant in the accurate form a (r^2 - |f - (b'/a) d|^2) (module docstring)."""
+    with f = o - centre: b' = d.f, c = |f|^2 - r^2, disc = r^2 - |f - b' d|^2 (the
+    accurate form of the module docstring)."""
     f = o - center
     b = dr.dot(f, d)
     c = dr.squared_norm(f) - radius * radius
@@ -83,7 +84,12 @@ def nearest_fraction(o, d, center, radius):
 
 
 def intersect(o, d, center, radius, tmax):
-    """Nearest root in (0, tmax) and whether there is one (the hit record's t); |d| = 1."""
+    """Nearest root in (0, tmax) and whether there is one (the hit record's t); |d| = 1.
+
+    The hit is the nearest root in front of the ray, t0 if t0 > 0, else t1 (a ray
+    from inside the sphere meets it at the far root; the roots: lecture 1,
+    "Ray-sphere intersection"), picked by the roots' signs (:func:`nearest_fraction`).
+    """
     num, den, found = nearest_fraction(o, d, center, radius)
     t = num / den
     return t, found & (t < tmax)
