@@ -19,17 +19,23 @@ import drjit as dr
 from tracer import faults
 
 
-def quadratic(o, d, center, radius):
-    """(b', c, disc) of the ray-sphere quadratic t^2 + 2 b' t + c = 0 for |d| = 1 (a = 1),
-    with f = o - centre: b' = d.f, c = |f|^2 - r^2, disc = r^2 - |f - b' d|^2 (the
-    accurate form of the module docstring)."""
+def quadratic(o, d, center, radius, unit: bool = True):
+    """(b', c, disc, a) of the ray-sphere quadratic a t^2 + 2 b' t + c = 0, with
+    f = o - centre: a = d.d, b' = d.f, c = |f|^2 - r^2 and the discriminant in the
+    accurate form a (r^2 - |f - (b'/a) d|^2) (module docstring). ``unit`` promises
+    |d| = 1: a is then 1, returned as None, and disc = r^2 - |f - b' d|^2."""
     f = o - center
     b = dr.dot(f, d)
     c = dr.squared_norm(f) - radius * radius
-    disc = radius * radius - dr.squared_norm(f - b * d)
-    if faults.on("sphere-half-b-discriminant"):
-        disc = b * b - 4 * c
-    return b, c, disc
+    if unit:
+        a = None
+        disc = radius * radius - dr.squared_norm(f - b * d)
+        if faults.on("sphere-half-b-discriminant"):
+            disc = b * b - 4 * c
+    else:
+        a = dr.squared_norm(d)
+        disc = a * (radius * radius - dr.squared_norm(f - (b / a) * d))
+    return b, c, disc, a
 
 
 def roots(o, d, center, radius, unit: bool = False):
@@ -39,14 +45,7 @@ def roots(o, d, center, radius, unit: bool = False):
     be negative: a ray starting inside the sphere has t0 < 0 < t1. ``unit``
     promises |d| = 1 (a = 1), which saves two divisions.
     """
-    if unit:
-        b, c, disc = quadratic(o, d, center, radius)
-    else:
-        f = o - center
-        b = dr.dot(f, d)
-        c = dr.squared_norm(f) - radius * radius
-        a = dr.squared_norm(d)
-        disc = a * (radius * radius - dr.squared_norm(f - (b / a) * d))
+    b, c, disc, a = quadratic(o, d, center, radius, unit)
     real = disc >= 0
     q = -(b + dr.copysign(dr.sqrt(dr.maximum(disc, 0)), b))
     t_a = c / q
@@ -71,7 +70,7 @@ def nearest_fraction(o, d, center, radius):
     the bit. A vector division takes the one divider unit for many cycles (as does
     a square root), so a block of five spheres divides once instead of five times.
     """
-    b, c, disc = quadratic(o, d, center, radius)
+    b, c, disc, _ = quadratic(o, d, center, radius)
     q_abs = dr.abs(b) + dr.sqrt(dr.maximum(disc, 0))        # |q|, as roots() rounds it
     q_pos = dr.copysign(1.0, b) < 0                          # q > 0 (where |q| > 0)
     frac = ((c > 0) == q_pos) & (c != 0)                     # c and q of one sign
