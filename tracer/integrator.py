@@ -111,6 +111,10 @@ SHADOW_EPSILON = 1e-3
 SIGNIFICANT_WEIGHT = 1e-3
 
 
+#: Levels up to which the stack schedule sums its per-level ray counts with one scatter
+#: each, written out in the kernel (:meth:`Integrator._render_stack`); deeper, a loop.
+UNROLLED_LEVELS = 64
+
 #: How the recursion is scheduled (:class:`Integrator`'s ``schedule``).
 SCHEDULES = ("auto", "wavefront", "stack")
 
@@ -776,9 +780,22 @@ class Integrator:
         # every size share it: a literal here made each image size compile its own.
         stride = dr.opaque(jit.UInt32, packets)
         packet = b.slot >> 4
-        for j in range(3 * levels):
-            dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * stride + packet,
-                              mode=dr.ReduceMode.Local)
+        if levels <= UNROLLED_LEVELS:
+            for j in range(3 * levels):
+                dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * stride + packet,
+                                  mode=dr.ReduceMode.Local)
+        else:
+            # One scatter a count written out would make a kernel whose build grows faster
+            # than its size: LLVM took 7 s for 912 of them (max_depth 304) and about 38 s
+            # for 3,000 (max_depth 1000; more than 120 s on a busy machine); a loop over
+            # the counts builds in constant time (the whole render then takes 1.5 s).
+            def add(j, counts):
+                dr.scatter_reduce(dr.ReduceOp.Add, total, counts.read(j), j * stride + packet,
+                                  mode=dr.ReduceMode.Local)
+                return j + 1, counts
+
+            dr.while_loop((dr.zeros(jit.UInt32, n), counts),
+                          lambda j, _: j < 3 * levels, add)
         dr.eval(*L, total)
         return L, dr.block_sum(jit.UInt64(total), packets)
 
