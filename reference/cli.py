@@ -35,6 +35,9 @@ def _size(text: str) -> tuple[int, int]:
             from None
     if size[0] < 1 or size[1] < 1:
         raise argparse.ArgumentTypeError(f"expected a positive size, got {text!r}")
+    if max(size) > 2 ** 32 - 1:  # no image side beyond 32-bit indices; not echoed whole later
+        raise argparse.ArgumentTypeError(f"expected sides of at most 4,294,967,295 pixels, "
+                                         f"got {text!r}")
     return size
 
 
@@ -858,12 +861,30 @@ def cmd_suite(args) -> int:
 # ---------------------------------------------------------------- parser
 
 
+#: The longest value an option error echoes whole (a 5000-digit --seed is cut).
+ECHO_LIMIT = 60
+
+
+def shorten(text: str, limit: int = ECHO_LIMIT) -> str:
+    """``text`` cut to about ``limit`` characters, its start and end kept and its length
+    said: ``'99999...99999' (5,002 characters)``."""
+    if len(text) <= limit:
+        return text
+    keep = max(limit - 3, 2)
+    return f"{text[:keep - keep // 3]}...{text[-(keep // 3):]} ({len(text):,} characters)"
+
+
 class Parser(argparse.ArgumentParser):
-    """argparse, with its errors in one line that points to --help (not usage + error)."""
+    """argparse, with its errors in one line that points to --help (not usage + error);
+    each word of the message longer than ECHO_LIMIT (a value echoed back) is shortened."""
 
     def error(self, message: str):
+        import re
+
         from tracer.errors import one_line
 
+        message = re.sub(rf"\S{{{ECHO_LIMIT + 1},}}", lambda m: shorten(m.group()),
+                         one_line(message, 1 << 20))
         self.exit(EXIT_USAGE, f"{self.prog}: error: {one_line(message)} "
                               f"(see {self.prog} --help)\n")
 
