@@ -41,6 +41,7 @@ explaining a part), or two bugs at once (each is fitted alone).
 from __future__ import annotations
 
 import hashlib
+import io
 import math
 import os
 import pickle
@@ -360,11 +361,13 @@ def reached_faults(scene) -> frozenset[str]:
 
 def cache_dir() -> Path:
     """Where the scenes' images with a bug are kept: ``WHITTED_SUSPECTS_CACHE``, else
-    ``$XDG_CACHE_HOME/whitted/suspects`` (``~/.cache/whitted/suspects``)."""
+    ``$XDG_CACHE_HOME/whitted/suspects`` (``~/.cache/whitted/suspects``); used only as
+    :mod:`tracer.cache` allows (this user's, 0700, no one else may write)."""
+    from tracer import cache
+
     if os.environ.get("WHITTED_SUSPECTS_CACHE"):
         return Path(os.environ["WHITTED_SUSPECTS_CACHE"])
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "whitted" / "suspects"
+    return cache.home() / "suspects"
 
 
 _TRACER_DIGEST: str | None = None
@@ -401,28 +404,67 @@ def mutated_image(scene, fault_id: str | None, seed: int = 0, cache: Path | None
     ``fault_id`` None: the tracer as written, rendered the same way (one
     render at ``seed``). Kept as .npy under ``cache`` (:func:`cache_dir` by
     default), keyed by the scene's content, the seed, the bug and the tracer's
-    sources.
+    sources, in folders and files :mod:`tracer.cache` makes and checks. A
+    stored image is used only when it is float32 of the film's shape and
+    finite everywhere (:func:`_cached_image`); anything else is rendered again
+    and overwritten.
     """
     from reference import mutants  # noqa: F401  (declares the catalog's ids)
+    from tracer import cache as tcache
     from tracer import faults
     from tracer.integrator import Integrator
 
-    folder = (cache or cache_dir()) / _scene_key(scene, seed)
+    top = cache or cache_dir()
+    folder = top / _scene_key(scene, seed)
     path = folder / f"{fault_id or 'as-written'}.npy"
-    try:
-        return np.load(path), True
-    except (OSError, ValueError):
-        pass
+    shape = (scene.film.height, scene.film.width, 3)
+    img = _cached_image(path, shape) if tcache.folder(folder, top, create=False) else None
+    if img is not None:
+        return img, True
     with faults.active(*([fault_id] if fault_id else [])):
         img = np.asarray(Integrator(scene, seed=seed).render().image, dtype=np.float32)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-        tmp = folder / f".{path.stem}.{os.getpid()}.npy"
-        np.save(tmp, img)
-        os.replace(tmp, path)
-    except OSError:
-        pass   # a read-only cache only costs time
+    # An image that is not finite everywhere would be refused when read again.
+    if img.shape == shape and np.isfinite(img).all() and tcache.folder(folder, top):
+        buf = io.BytesIO()
+        np.save(buf, img, allow_pickle=False)
+        tcache.write_bytes(path, buf.getvalue())   # not written: it only costs time
     return img, False
+
+
+def _cached_image(path: Path, shape: tuple[int, int, int]) -> np.ndarray | None:
+    """The float32 image of ``shape`` kept as .npy at ``path``, or None for anything else.
+
+    The header is read and checked before any data (a header may claim any
+    size); then exactly the data the shape needs, which must be finite. A
+    pickled object, another dtype or shape, an .npz or a short file is a miss.
+    """
+    from numpy.lib import format as npy
+
+    from tracer import cache as tcache
+
+    f = tcache.open_entry(path)
+    if f is None:
+        return None
+    with f:
+        try:
+            version = npy.read_magic(f)
+            if version == (1, 0):
+                header = npy.read_array_header_1_0(f)
+            elif version == (2, 0):
+                header = npy.read_array_header_2_0(f)
+            else:
+                return None
+            got_shape, fortran, dtype = header
+            if tuple(got_shape) != shape or fortran or dtype != np.dtype(np.float32):
+                return None
+            n = math.prod(shape)
+            data = f.read(4 * n)
+        except (OSError, ValueError, SyntaxError, TypeError, EOFError):
+            return None
+    if len(data) != 4 * n:
+        return None
+    img = np.frombuffer(data, dtype=np.float32).reshape(shape).copy()
+    return img if np.isfinite(img).all() else None
 
 
 def catalog_suspects(scene, seed: int = 0, ids: list[str] | None = None) -> list[Suspect]:

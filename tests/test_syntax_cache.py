@@ -1,13 +1,16 @@
-"""The on-disk cache of ``drjit.syntax``'s transformed code (tracer.backend.syntax).
+"""``drjit.syntax`` applied on first call (tracer.backend.syntax), in memory only.
 
-A later process loads a loop's transformed code instead of transforming the
-source again; what it loads must be the transformation of the source as it is
-now, never of an earlier version.
+The transformation of a loop's source is made when the function is first
+called, once per wrapper, and kept for the process alone: no code is read
+from or written to a cache folder, so nothing planted there can run (issue
+30, "Caches hold data, never code").
 """
 
 from __future__ import annotations
 
+import hashlib
 import importlib
+import marshal
 import sys
 
 import drjit as dr
@@ -48,43 +51,45 @@ def _run(fn):
     return backend.syntax(fn)(jit.UInt32([0, 3, 5])).numpy().tolist()
 
 
-def test_transformed_code_is_stored_and_loaded_by_a_later_wrapper(probe, monkeypatch):
+def test_the_source_is_transformed_on_first_call_once_per_wrapper(probe, monkeypatch):
+    _, module = probe
+    calls = []
+    real = dr.syntax
+    monkeypatch.setattr(dr, "syntax", lambda fn: calls.append(fn) or real(fn))
+    wrapped = backend.syntax(module.count_down)
+    assert calls == []                                    # not at decoration
+    assert wrapped(jit.UInt32([0, 3, 5])).numpy().tolist() == [0, 3, 5]
+    assert wrapped(jit.UInt32([2])).numpy().tolist() == [2]
+    assert calls == [module.count_down]                   # once
+
+
+def test_code_planted_in_the_old_cache_folder_is_never_run(probe, tmp_path):
+    # The file name an earlier version computed and loaded its code from; here it holds
+    # code that leaves a mark when run. The loop must still count, and leave no mark.
+    _, module = probe
+    fn = module.count_down
+    h = hashlib.blake2b(marshal.dumps(fn.__code__), digest_size=16)
+    h.update(f"{dr.__version__} {sys.version}".encode())
+    folder = tmp_path / "cache" / "whitted" / "syntax"
+    folder.mkdir(parents=True)
+    mark = tmp_path / "planted-code-ran"
+    ns: dict = {}
+    exec(f"def count_down(x):\n    open({str(mark)!r}, 'w').close()\n    return x\n", ns)
+    planted = folder / f"{fn.__module__}.{fn.__qualname__}-{h.hexdigest()}.marshal"
+    planted.write_bytes(marshal.dumps(ns["count_down"].__code__))
+    assert _run(fn) == [0, 3, 5]
+    assert not mark.exists()
+
+
+def test_nothing_is_written_to_the_cache_folder(probe, tmp_path):
     _, module = probe
     assert _run(module.count_down) == [0, 3, 5]
-    files = list(backend.syntax_cache_dir().glob("whitted_syntax_probe.count_down-*.marshal"))
-    assert len(files) == 1
-
-    def refuse(fn):
-        raise AssertionError("transformed again although the cache holds the code")
-
-    # A later wrapper (as in a later process) loads the stored code: no transformation.
-    monkeypatch.setattr(dr, "syntax", refuse)
-    assert _run(module.count_down) == [0, 3, 5]
+    assert not (tmp_path / "cache" / "whitted" / "syntax").exists()
 
 
 def test_an_edited_source_is_transformed_anew(probe):
     path, module = probe
     assert _run(module.count_down) == [0, 3, 5]
-    # The same file, module and function name, another loop body: another key.
     path.write_text(PROBE.format(step=2))
     module = importlib.reload(module)
     assert _run(module.count_down) == [0, 6, 10]
-    assert len(list(backend.syntax_cache_dir().glob("*.marshal"))) == 2
-
-
-def test_a_damaged_cache_file_is_replaced(probe):
-    _, module = probe
-    _run(module.count_down)
-    (stored,) = backend.syntax_cache_dir().glob("*.marshal")
-    stored.write_bytes(b"not marshalled code")
-    assert _run(module.count_down) == [0, 3, 5]
-    assert stored.read_bytes() != b"not marshalled code"
-
-
-def test_an_unwritable_cache_leaves_the_transformation_in_the_process(probe, tmp_path,
-                                                                     monkeypatch):
-    _, module = probe
-    blocker = tmp_path / "not_a_folder"
-    blocker.write_text("")
-    monkeypatch.setenv("XDG_CACHE_HOME", str(blocker))
-    assert _run(module.count_down) == [0, 3, 5]

@@ -142,9 +142,10 @@ def syntax(fn):
     The decorator parses and recompiles the function's source, about 5-15 ms
     each; applied at import, every ``whitted`` process paid it for loops its
     scene never runs (about 27 ms of a 0.5 s render, measured with cProfile).
-    The transformed code is also kept on disk (:func:`_transformed`), so that
-    a later process loads it instead of transforming again. Methods work as
-    with ``drjit.syntax``: the wrapper receives ``self``.
+    The transformed function is kept in memory for the process only: code is
+    never read from or written to a cache on disk (:mod:`tracer.cache`), so
+    nothing a file holds can run. Methods work as with ``drjit.syntax``: the
+    wrapper receives ``self``.
     """
     import functools
 
@@ -154,62 +155,12 @@ def syntax(fn):
     def wrapper(*args, **kwargs):
         nonlocal done
         if done is None:
-            done = _transformed(fn)
+            import drjit as dr
+
+            done = dr.syntax(fn)
         return done(*args, **kwargs)
 
     return wrapper
-
-
-def syntax_cache_dir():
-    """Where :func:`syntax` keeps transformed code: ``$XDG_CACHE_HOME/whitted/syntax``
-    (``~/.cache/whitted/syntax``)."""
-    from pathlib import Path
-
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "whitted" / "syntax"
-
-
-def _transformed(fn):
-    """``drjit.syntax(fn)``, its code read from :func:`syntax_cache_dir` where an earlier
-    process stored it.
-
-    The key is the function's own compiled code (``marshal`` of ``fn.__code__``:
-    its bytecode, constants, names and line numbers, so any edit of the source
-    gives another key), Dr.Jit's version (the transformation's) and Python's (the
-    format of marshalled code). The transformation needs the source read, parsed,
-    rewritten and compiled: 19.5 ms for the BVH build's six functions; the first
-    build of the 144,000-triangle knot in a process took 0.127 s transforming them,
-    0.101 s loading them (a throwaway script).
-    A file that cannot be read or loaded is replaced by a fresh transformation; one
-    that cannot be written leaves the process with its own.
-    """
-    import hashlib
-    import marshal
-    import sys
-    import types
-
-    import drjit as dr
-
-    h = hashlib.blake2b(marshal.dumps(fn.__code__), digest_size=16)
-    h.update(f"{dr.__version__} {sys.version}".encode())
-    path = syntax_cache_dir() / f"{fn.__module__}.{fn.__qualname__}-{h.hexdigest()}.marshal"
-    try:
-        code = marshal.loads(path.read_bytes())
-    except (OSError, EOFError, ValueError, TypeError):
-        code = None
-    if isinstance(code, types.CodeType) and code.co_name == fn.__name__:
-        new = types.FunctionType(code, fn.__globals__)
-        new.__defaults__ = fn.__defaults__
-        return new
-    new = dr.syntax(fn)
-    try:
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f"{path.name}.{os.getpid()}.tmp")
-        tmp.write_bytes(marshal.dumps(new.__code__))
-        os.replace(tmp, path)   # whole or absent, also with processes writing at once
-    except OSError:
-        pass
-    return new
 
 
 def lesser(a, b):

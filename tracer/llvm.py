@@ -18,8 +18,9 @@ Order of preference:
 
 Versions known to fail are refused by their file name, without loading them;
 any other candidate is loaded once in a child process before it is chosen
-(and the answer cached in ``~/.cache/whitted``), because a library of a good
-version can still fail to load, and an LLVM abort kills the process.
+(and the answer cached in ``~/.cache/whitted/llvm-probe.json``, a file used
+only as :mod:`tracer.cache` allows), because a library of a good version can
+still fail to load, and an LLVM abort kills the process.
 
 ``WHITTED_LLVM_SEARCH`` (directories separated by ``os.pathsep``) replaces
 steps 2 and 3 with a search of those directories only; packagers and the
@@ -36,6 +37,8 @@ import subprocess
 import sys
 from dataclasses import dataclass
 from pathlib import Path
+
+from tracer import cache
 
 #: Majors measured to work with drjit 1.5.0.
 KNOWN_GOOD_FROM = 19
@@ -152,17 +155,12 @@ def _system_candidates() -> list[Candidate]:
 
 def _probe(path: str) -> bool:
     """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child."""
-    cache = _probe_cache_file()
     # Keyed by the path as given: the same file reached through a link elsewhere
     # can fail where the original loads (its $ORIGIN-relative dependencies).
     key = f"{os.path.abspath(path)}:{_mtime(path)}"
-    results = {}
-    try:
-        results = json.loads(cache.read_text())
-        if key in results:
-            return bool(results[key])
-    except (OSError, ValueError):
-        pass
+    results = _read_probe_cache()
+    if key in results:
+        return results[key]
     code = ("import drjit as dr, drjit.llvm as m\n"
             "assert dr.has_backend(dr.JitBackend.LLVM)\n"
             "x = m.Float([1, 2, 3])\n"
@@ -175,12 +173,9 @@ def _probe(path: str) -> bool:
         ok = r.returncode == 0
     except (OSError, subprocess.TimeoutExpired):
         ok = False
-    try:
-        results[key] = ok
-        cache.parent.mkdir(parents=True, exist_ok=True)
-        cache.write_text(json.dumps(results))
-    except OSError:
-        pass
+    results[key] = ok
+    if cache.folder(cache.home()) is not None:
+        cache.write_bytes(_probe_cache_file(), json.dumps(results).encode())
     return ok
 
 
@@ -192,8 +187,23 @@ def _mtime(path: str) -> int:
 
 
 def _probe_cache_file() -> Path:
-    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
-    return Path(base) / "whitted" / "llvm-probe.json"
+    return cache.home() / "llvm-probe.json"
+
+
+def _read_probe_cache() -> dict[str, bool]:
+    """The probe's earlier answers, ``{"<path>:<mtime>": true or false}``; {} when the
+    cache may not be used (:mod:`tracer.cache`) or holds anything else (it is rewritten)."""
+    if cache.folder(cache.home(), create=False) is None:
+        return {}
+    data = cache.read_bytes(_probe_cache_file())
+    try:
+        results = json.loads(data) if data is not None else {}
+    except (ValueError, UnicodeDecodeError, RecursionError):
+        return {}
+    if not isinstance(results, dict) or not all(
+            isinstance(k, str) and isinstance(v, bool) for k, v in results.items()):
+        return {}
+    return results
 
 
 def _rejection(c: Candidate) -> str | None:
