@@ -20,7 +20,7 @@ def test_quick_report_writes_html_markdown_and_json(tmp_path):
     assert "[1/2] sphere_point" in r.stdout and "fresnel curves" in r.stdout
     out = tmp_path / "rep"
     data = json.loads((out / "report.json").read_text())
-    # The schema documented in the README.
+    # The schema documented in docs/report-json.md.
     assert data["pass"] is True and data["quick"] is True
     assert {"whitted", "mitsuba", "drjit", "backend"} <= set(data["versions"])
     (s,) = data["scenes"]
