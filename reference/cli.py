@@ -417,31 +417,22 @@ def cmd_export(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from reference.importer import disagreements, import_scene, mitsuba_view
+    from reference.importer import write_import
     from tracer.errors import UserError
     from tracer.imageio import check_output_path
-    from tracer.scene import parse_scene
+    from tracer.mitsuba_xml import VALUE_SHOWN
 
     out = check_output_path(args.output, (".toml",), "file type")
     params = {}
     for item in args.param or []:
         name, sep, value = item.partition("=")
-        if not sep or not name:
-            raise UserError(f"-D {item}: expected NAME=VALUE")
+        shown_item = item if len(item) <= VALUE_SHOWN else item[:VALUE_SHOWN - 3] + "..."
+        if not sep or not name or not value.strip():
+            raise UserError(f"-D {shown_item!r}: expected NAME=VALUE with a value")
         params[name] = value
-    text, imp = import_scene(args.xml, out, args.approximate, **params)
+    scene, imp = write_import(args.xml, out, args.approximate, args.verify, **params)
     for line in imp.warnings:
         print(f"warning: {line}", flush=True)
-    out.write_text(text)
-    try:  # what render would refuse, said now
-        scene = parse_scene(imp.data, str(out))
-    except UserError as e:
-        raise UserError(f"wrote {shown(out)}, but the tracer cannot load it: {e}") from None
-    if args.verify:
-        problems = disagreements(scene, mitsuba_view(args.xml, **params))
-        if problems:
-            raise UserError(f"{shown(args.xml)}: the import disagrees with Mitsuba's own "
-                            "loading: " + "; ".join(problems))
     n = sum(len(v) for v in imp.notes.values())
     print(f"wrote {shown(out)} ({len(scene.shapes)} shapes, {len(scene.lights)} lights; "
           f"{n} notes as comments" + (", APPROXIMATE" if imp.approximate else "")

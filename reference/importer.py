@@ -11,6 +11,13 @@ and horizontal field of view and the film's size through ``mi.traverse``, and
 :func:`disagreements` compares them with the imported scene (used by the
 tests and by ``whitted import --verify``). A ``load_dict`` dictionary, such as
 ``mi.cornell_box()``, is written as XML first (:func:`dict_to_xml`).
+
+:func:`write_import` is ``whitted import``: nothing is written unless the
+TOML text loads as a scene (parsed back from memory, as ``whitted render``
+would read it) and, with ``verify``, agrees with Mitsuba; the TOML is
+written to a temporary file renamed into place, and meshes converted for a
+failed import are removed again. Mitsuba's own errors (a corrupt
+``serialized`` file, a scene it refuses) become one-line errors (:class:`UserError`).
 """
 
 from __future__ import annotations
@@ -18,11 +25,15 @@ from __future__ import annotations
 import json
 import math
 import os
+import struct
+import tomllib
+import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from tracer.errors import UserError, one_line
 from tracer.mitsuba_xml import Imported, read_xml
 
 # ---------------------------------------------------------------- TOML
@@ -34,8 +45,8 @@ def _value(v) -> str:
     if isinstance(v, int):
         return str(v)
     if isinstance(v, float):
-        if not math.isfinite(v):
-            raise ValueError(f"no TOML for {v}")
+        if not math.isfinite(v):  # the reader refuses them: a scene value cannot be one
+            raise UserError(f"no TOML for the number {v}")
         r = repr(v)
         return r if ("." in r or "e" in r or "inf" in r) else r + ".0"
     if isinstance(v, (np.floating, np.integer)):
@@ -106,27 +117,186 @@ def _relative_files(data: dict, folder: Path) -> None:
 
 def import_scene(source: str | Path, output: str | Path | None = None,
                  approximate: bool = False, **params) -> tuple[str, Imported]:
-    """(TOML text, the import) of a Mitsuba XML file; file names relative to ``output``."""
+    """(TOML text, the import) of a Mitsuba XML file; file names relative to ``output``.
+
+    The text is checked: it loads as a scene (:func:`check_toml`), else
+    :class:`UserError`, and the meshes converted for it are removed again."""
+    created: list[Path] = []
+    try:
+        text, imp, _ = _import(source, output, approximate, params, created)
+    except BaseException:
+        _remove(created)
+        raise
+    return text, imp
+
+
+def write_import(source: str | Path, output: str | Path, approximate: bool = False,
+                 verify: bool = False, **params):
+    """``whitted import``: (the scene, the import) of ``source``, written to ``output``.
+
+    Written only when complete and checked: the TOML loads as a scene
+    (:func:`check_toml`) and, with ``verify``, Mitsuba's loading of ``source``
+    agrees on the camera and film (:func:`disagreements`); the file is renamed into
+    place from a temporary one, and on any failure the meshes converted for it are
+    removed, so that nothing is left behind."""
+    from tracer.imageio import _atomic_write
+
+    output = Path(output)
+    created: list[Path] = []
+    try:
+        text, imp, scene = _import(source, output, approximate, params, created)
+        if verify:
+            problems = disagreements(scene, mitsuba_view(source, **params))
+            if problems:
+                raise UserError(f"{one_line(str(source), 300)}: the import disagrees with "
+                                "Mitsuba's own loading: " + "; ".join(problems))
+        _atomic_write(output, lambda tmp: Path(tmp).write_text(text))
+    except BaseException:
+        _remove(created)
+        raise
+    return scene, imp
+
+
+def check_toml(text: str | dict, output: str | Path):
+    """The scene the TOML text describes, read back as ``whitted render`` reads the file
+    (``tomllib`` and the scene's validation, files relative to ``output``), else a
+    :class:`UserError` saying that the tracer cannot load the import. A dictionary is
+    validated as the document it is."""
+    from tracer.scene import parse_scene
+
+    try:
+        return parse_scene(tomllib.loads(text) if isinstance(text, str) else text, str(output))
+    except tomllib.TOMLDecodeError as e:  # pragma: no cover (to_toml writes valid TOML)
+        raise UserError(f"the import is not valid TOML ({e}); nothing was written") from None
+    except UserError as e:
+        raise UserError(f"the tracer cannot load the import, nothing was written: {e}") \
+            from None
+
+
+def _import(source, output, approximate: bool, params: dict, created: list):
     folder = Path(output).resolve().parent if output is not None else Path.cwd()
     stem = Path(output).stem if output is not None else Path(source).stem
-    imp = read_xml(source, approximate, convert=_serialized_converter(folder, stem), **params)
+    imp = read_xml(source, approximate, convert=_serialized_converter(folder, stem, created),
+                   **params)
+    where = output if output is not None else folder / f"{stem}.toml"
+    scene = check_toml(imp.data, where)  # file names still absolute: valid in any folder
     _relative_files(imp.data, folder)
-    return to_toml(imp, Path(source).name), imp
+    text = to_toml(imp, Path(source).name)
+    if folder.is_dir():  # the very text, read back as `whitted render` will read the file
+        scene = check_toml(text, where)
+    return text, imp, scene
 
 
-def _serialized_converter(folder: Path, stem: str):
+def _remove(paths: list[Path]) -> None:
+    """Remove files (and then folders, once empty) that a failed import created."""
+    for p in reversed(paths):
+        try:
+            if p.is_dir():
+                p.rmdir()
+            else:
+                p.unlink()
+        except OSError:
+            pass
+
+
+#: Mitsuba's ``serialized`` format (src/shapes/serialized.cpp): a uint16 0x041C, a uint16
+#: version (3 or 4), then a zlib stream of flags, (version 4) a name, vertex and face counts.
+SERIALIZED_MAGIC = 0x041C
+#: Memory of converting one vertex and one face (upper bounds): Mitsuba's buffers and the
+#: doubles it reads, numpy's copies, the OBJ's text lines and the text joined.
+SERIALIZED_BYTES_PER_VERTEX = 512
+SERIALIZED_BYTES_PER_FACE = 256
+#: DEFLATE expands at most about 1032 to 1: counts needing more data than that are corrupt.
+DEFLATE_MAX_RATIO = 1032
+
+
+def check_serialized(path: Path, index: int) -> tuple[int, int]:
+    """(vertices, faces) of mesh ``index`` of a Mitsuba ``serialized`` file, from its headers.
+
+    Refused (:class:`UserError`): a file that is not one, a ``shape_index`` beyond
+    its meshes (Mitsuba's own check lets the one past the last through), counts the
+    file cannot hold, and a mesh whose conversion would take more than
+    ``WHITTED_MAX_MEMORY`` (Mitsuba allocates its buffers from these counts)."""
+    from tracer.limits import check_memory
+
+    def bad(why: str) -> UserError:
+        return UserError(f"{one_line(path.name, 60)}: not a Mitsuba serialized mesh ({why})")
+
+    size = path.stat().st_size
+    with open(path, "rb") as f:  # a regular file: the reader checked it
+        head = f.read(4)
+        if len(head) < 4 or struct.unpack("<H", head[:2])[0] != SERIALIZED_MAGIC:
+            raise bad("no 0x041C header")
+        version = struct.unpack("<H", head[2:])[0]
+        if version not in (3, 4):
+            raise bad(f"version {version}; Mitsuba reads 3 and 4")
+        offset = 0
+        if index:
+            width = 8 if version == 4 else 4
+            f.seek(max(size - 4, 0))
+            count = struct.unpack("<I", f.read(4).rjust(4, b"\0"))[0]
+            if index >= count:
+                raise UserError(f"{one_line(path.name, 60)}: shape_index {index}, but the file "
+                                f"holds {count} meshes")
+            at = size - 4 - width * (count - index)
+            if at < 4:
+                raise bad("its table of meshes is truncated")
+            f.seek(at)
+            offset = struct.unpack("<Q" if width == 8 else "<I", f.read(width))[0]
+            if not 4 <= offset < size - 8:
+                raise bad(f"mesh {index} at offset {offset}, outside the file")
+            f.seek(offset)
+            if f.read(4) != head:
+                raise bad(f"no header at mesh {index}")
+        compressed = f.read(1 << 16)
+    try:
+        data = zlib.decompressobj().decompress(compressed, 1 << 16)
+    except zlib.error:
+        raise bad("its data is not zlib-compressed") from None
+    pos = 4
+    if version == 4:
+        pos = data.find(b"\0", 4) + 1
+        if pos == 0:
+            raise bad("its header is truncated")
+    if len(data) < pos + 16:
+        raise bad("its header is truncated")
+    vertices, faces = struct.unpack("<QQ", data[pos:pos + 16])
+    if 12 * (vertices + faces) > DEFLATE_MAX_RATIO * (size - offset):
+        raise bad(f"{vertices:,} vertices and {faces:,} faces in a {size:,}-byte file")
+    check_memory(vertices * SERIALIZED_BYTES_PER_VERTEX + faces * SERIALIZED_BYTES_PER_FACE,
+                 f"converting a serialized mesh of {vertices:,} vertices and {faces:,} faces")
+    return vertices, faces
+
+
+def _mitsuba_error(e: Exception) -> str:
+    """Mitsuba's message of an exception: its last line that says something, cut."""
+    lines = [x.strip() for x in str(e).splitlines() if x.strip()]
+    return one_line(lines[-1] if lines else type(e).__name__, 300)
+
+
+def _serialized_converter(folder: Path, stem: str, created: list | None = None):
     """``convert(file, index)``: a Mitsuba ``serialized`` mesh written as OBJ by Mitsuba.
 
-    Mitsuba reads the file (its compressed format); its vertex positions, normals,
-    texture coordinates and faces, read through ``mi.traverse``, are written to
-    ``meshes/STEM_NAME_INDEX.obj`` beside the TOML."""
+    Mitsuba reads the file (its compressed format; its headers checked first:
+    :func:`check_serialized`); its vertex positions, normals, texture coordinates
+    and faces, read through ``mi.traverse``, are written to
+    ``meshes/STEM_NAME_INDEX.obj`` beside the TOML (through a temporary file; each
+    file and folder created is appended to ``created``)."""
+    created = [] if created is None else created
+
     def convert(source: Path, index: int) -> Path:
         from reference import mitsuba
         from reference.mitsuba_scene import _write_obj
+        from tracer.imageio import _atomic_write
 
+        check_serialized(source, index)
         mi = mitsuba()
-        mesh = mi.load_dict({"type": "serialized", "filename": str(source),
-                             "shape_index": index})
+        try:
+            mesh = mi.load_dict({"type": "serialized", "filename": str(source),
+                                 "shape_index": index})
+        except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
+            raise UserError(f"Mitsuba cannot read {one_line(source.name, 60)}: "
+                            f"{_mitsuba_error(e)}") from None
         p = mi.traverse(mesh)
 
         def arr(key, n):
@@ -139,8 +309,12 @@ def _serialized_converter(folder: Path, stem: str):
                 "faces": np.asarray(p["faces"], dtype=np.int64).reshape(-1, 3),
                 "normals": arr("vertex_normals", 3), "uvs": arr("vertex_texcoords", 2)}
         out = folder / "meshes" / f"{stem}_{source.stem}_{index}.obj"
-        out.parent.mkdir(parents=True, exist_ok=True)
-        _write_obj(out, node)
+        if not out.parent.is_dir():
+            out.parent.mkdir(parents=True, exist_ok=True)
+            created.append(out.parent)
+        if not out.exists():
+            created.append(out)
+        _atomic_write(out, lambda tmp: _write_obj(Path(tmp), node))
         return out
     return convert
 
@@ -242,7 +416,11 @@ def mitsuba_view(path: str | Path, **params) -> dict:
     from reference import mitsuba
 
     mi = mitsuba()
-    scene = mi.load_file(str(path), **params)
+    try:
+        scene = mi.load_file(str(path), **params)
+    except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
+        raise UserError(f"{one_line(str(path), 300)}: Mitsuba cannot load it: "
+                        f"{_mitsuba_error(e)}") from None
     sensor = scene.sensors()[0]
     p = mi.traverse(sensor)
     out = {"to_world": np.asarray(p["to_world"].matrix, dtype=np.float64).reshape(4, 4),

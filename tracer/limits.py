@@ -18,7 +18,10 @@ WHITTED_MAX_MEMORY        half the machine's memory     estimated memory of one 
 WHITTED_MAX_DEPTH         1000                          max_depth (path segments)
 WHITTED_MAX_PRIMITIVES    2^31                          primitives, instances counted
                                                         once per instance
-WHITTED_MAX_SCENE_BYTES   64 MiB                        size of a scene file
+WHITTED_MAX_SCENE_BYTES   64 MiB                        size of a scene file (of a Mitsuba
+                                                        XML scene: with all its includes)
+WHITTED_MAX_INCLUDES      1000                          <include>s of a Mitsuba XML scene,
+                                                        all levels together
 WHITTED_LPE_MAX_STATES    1000                          states of a light-path automaton
 ========================  ============================  =================================
 
@@ -74,6 +77,7 @@ MAX_DEPTH = Limit("WHITTED_MAX_DEPTH", 1000, "max_depth")
 MAX_PRIMITIVES = Limit("WHITTED_MAX_PRIMITIVES", 1 << 31, "primitives")
 MAX_SCENE_BYTES = Limit("WHITTED_MAX_SCENE_BYTES", 64 << 20, "scene file size")
 LPE_MAX_STATES = Limit("WHITTED_LPE_MAX_STATES", 1000, "automaton states")
+MAX_INCLUDES = Limit("WHITTED_MAX_INCLUDES", 1000, "includes")
 
 #: Upper bounds of memory per sample in flight and per pixel (see the module docstring):
 #: the tracer's wavefront state over a recursion level (origins, directions, weights,

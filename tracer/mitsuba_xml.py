@@ -18,6 +18,17 @@ before it builds plugins, and maps the plugins onto the scene format's keys:
   input (refused; ``approximate`` averages them);
 * named indices of refraction (:mod:`tracer.mitsuba_ior`) as numbers.
 
+Input is read defensively, as the TOML loader reads it: every file a scene
+names (the scene, includes, meshes, textures, serialized meshes) is looked up
+with its symbolic links followed and must be a regular file (no folder, FIFO
+or device; files outside the scene's folder are allowed, as Mitsuba allows
+them); the scene and all its includes together are read within
+``WHITTED_MAX_SCENE_BYTES`` (checked from their sizes before reading, reads
+bounded), at most ``WHITTED_MAX_INCLUDES`` includes in all and 16 levels deep;
+every number is parsed strictly (an integer where Mitsuba wants one, finite and
+within float32's range) and values echoed in messages are cut to
+:data:`VALUE_SHOWN` characters.
+
 The result is a TOML document as a dictionary (:class:`Imported`), plus a note
 for every place where something was approximated, keyed by the document's
 path ("camera", "materials.glass", "shapes[2]"). ``whitted import`` writes it
@@ -33,7 +44,9 @@ mapped onto it, each substitution reported once in :attr:`Imported.warnings`.
 from __future__ import annotations
 
 import math
+import os
 import re
+import stat
 import xml.parsers.expat
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -42,11 +55,30 @@ import numpy as np
 
 from tracer import transform as tf
 from tracer.errors import UserError
+from tracer.limits import MAX_INCLUDES, MAX_SCENE_BYTES, refuse
 from tracer.mitsuba_ior import IOR
+
+#: The longest value (an attribute, a -D value, a file name) echoed in a message.
+VALUE_SHOWN = 60
+#: The largest finite float32: numbers beyond it are refused (the tracer and Mitsuba are float32).
+FLOAT32_MAX = 3.4028234663852886e38
+#: Includes nested deeper than this are refused (a file that includes itself stops here).
+MAX_INCLUDE_DEPTH = 16
 
 
 class XMLImportError(UserError):
     """A Mitsuba XML scene outside the subset, or malformed; names the file, line and element."""
+
+
+def _short(value) -> str:
+    """A value as a message echoes it: cut to VALUE_SHOWN characters, with an ellipsis."""
+    text = str(value)
+    return text if len(text) <= VALUE_SHOWN else text[:VALUE_SHOWN - 3] + "..."
+
+
+def _cut(value) -> str:
+    """:func:`_short`, quoted."""
+    return repr(_short(value))
 
 
 @dataclass
@@ -62,8 +94,9 @@ class Node:
         return self.attrs.get("type", "")
 
     def where(self) -> str:
-        t = f' type="{self.type}"' if self.type else ""
-        return f"{self.file}:{self.line}: <{self.tag}{t}>"
+        t = f' type="{_short(self.type)}"' if self.type else ""
+        n = f' name="{_short(self.attrs["name"])}"' if "name" in self.attrs else ""
+        return f"{self.file}:{self.line}: <{_short(self.tag)}{t}{n}>"
 
 
 @dataclass
@@ -84,14 +117,85 @@ class Imported:
 # ---------------------------------------------------------------- parsing
 
 
-def _parse_file(path: Path) -> Node:
-    """The XML file as a tree of Nodes with line numbers (expat, no entities fetched)."""
+def regular_file(path: Path, what: str, where: str) -> tuple[Path, os.stat_result]:
+    """``path`` with its symbolic links followed, and its status: it must be a regular file.
+
+    A folder, FIFO, device or socket is refused before it is opened (a FIFO would
+    block, /dev/zero never ends); ``what`` names the file in messages ("an include"),
+    ``where`` is the message's prefix (the file or the element naming it; with an
+    empty ``what`` the file itself)."""
+    subject = f"{what} {_cut(path)} " if what else ""
     try:
-        data = path.read_bytes()
+        real = Path(os.path.realpath(path))
+        st = os.stat(real)
     except FileNotFoundError:
-        raise XMLImportError(f"{path}: no such file") from None
-    except IsADirectoryError:
-        raise XMLImportError(f"{path}: is a directory, expected a Mitsuba .xml scene") from None
+        raise XMLImportError(f"{where}: {subject or 'no such file'}"
+                             f"{'not found' if subject else ''}") from None
+    except (OSError, ValueError) as e:  # a loop of links, a name too long, a NUL in it
+        raise XMLImportError(f"{where}: cannot read {subject or 'it '}"
+                             f"({getattr(e, 'strerror', None) or e})") from None
+    if stat.S_ISDIR(st.st_mode):
+        raise XMLImportError(f"{where}: {subject}is a folder, expected "
+                             f"{'a file' if subject else 'a Mitsuba .xml scene'}")
+    if not stat.S_ISREG(st.st_mode):
+        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
+                if stat.S_ISSOCK(st.st_mode) else "a device")
+        raise XMLImportError(f"{where}: {subject}is {kind}, expected a regular file")
+    return real, st
+
+
+class _Budget:
+    """What a scene and its includes may read together: WHITTED_MAX_SCENE_BYTES in all,
+    WHITTED_MAX_INCLUDES includes."""
+
+    def __init__(self):
+        self.limit = MAX_SCENE_BYTES.value()
+        self.bytes_left = self.limit
+        self.includes_limit = MAX_INCLUDES.value()
+        self.includes = 0
+
+    def include(self, node: Node) -> None:
+        self.includes += 1
+        if self.includes > self.includes_limit:
+            try:
+                refuse(MAX_INCLUDES, f"{node.where()}: include number {self.includes:,}")
+            except UserError as e:
+                raise XMLImportError(str(e)) from None
+
+    def _too_big(self, where: str) -> None:
+        try:
+            refuse(MAX_SCENE_BYTES, f"{where}: the scene and its includes are larger than "
+                                    f"{self.limit:,} bytes in all", f"{self.limit:,}")
+        except UserError as e:
+            raise XMLImportError(str(e)) from None
+
+    def read(self, path: Path, what: str, where: str) -> bytes:
+        """The bytes of a regular file (:func:`regular_file`), within what is left of the
+        budget: checked from its size before reading, and the read bounded too (a file
+        may grow, or report a wrong size)."""
+        real, st = regular_file(path, what, where)
+        if st.st_size > self.bytes_left:
+            self._too_big(where)
+        subject = f"{what} {_cut(path)}" if what else "it"
+        try:
+            # Non-blocking: a FIFO swapped in after the check must not hang the open.
+            fd = os.open(real, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
+                         | getattr(os, "O_CLOEXEC", 0))
+            with os.fdopen(fd, "rb") as f:
+                if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                    raise XMLImportError(f"{where}: {subject} is no longer a regular file")
+                data = f.read(self.bytes_left + 1)
+        except OSError as e:
+            raise XMLImportError(f"{where}: cannot read {subject} ({e.strerror or e})") \
+                from None
+        if len(data) > self.bytes_left:
+            self._too_big(where)
+        self.bytes_left -= len(data)
+        return data
+
+
+def _parse_file(path: Path, data: bytes) -> Node:
+    """The XML text of ``path`` as a tree of Nodes with line numbers (expat, no entities)."""
     parser = xml.parsers.expat.ParserCreate()
     root = Node("#document", {}, [], 0, str(path))
     stack = [root]
@@ -118,6 +222,9 @@ def _parse_file(path: Path) -> Node:
     except xml.parsers.expat.ExpatError as e:
         raise XMLImportError(f"{path}:{e.lineno}: not well-formed XML "
                              f"({xml.parsers.expat.ErrorString(e.code)})") from None
+    except (LookupError, ValueError) as e:  # encoding="..." that Python does not know
+        raise XMLImportError(f"{path}: unsupported XML encoding declaration "
+                             f"({_short(e)})") from None
     if len(root.children) != 1 or root.children[0].tag != "scene":
         raise XMLImportError(f"{path}: expected a Mitsuba scene (<scene version=...>) as the "
                              "root element")
@@ -131,18 +238,19 @@ class _Resolver:
     """default/$param substitution, include, path and id lookup, as Mitsuba's parser does."""
 
     def __init__(self, path: Path, params: dict):
-        self.root_dir = path.resolve().parent
+        self.root_dir = Path(os.path.realpath(path)).parent
         self.search = [self.root_dir]
         self.params = dict(params)
         self.ids: dict[str, Node] = {}
         self.depth = 0
+        self.budget = _Budget()
 
     def substitute(self, node: Node) -> None:
         for k, v in node.attrs.items():
             def repl(m, node=node):
                 if m.group(1) not in self.params:
-                    raise XMLImportError(f"{node.where()}: ${m.group(1)} has no value (no "
-                                         f"<default name=\"{m.group(1)}\"> and none given)")
+                    raise XMLImportError(f"{node.where()}: ${_short(m.group(1))} has no "
+                                         f"value (no <default> of that name and none given)")
                 return str(self.params[m.group(1)])
             node.attrs[k] = _PARAM.sub(repl, v)
 
@@ -154,7 +262,9 @@ class _Resolver:
                 name, value = child.attrs.get("name"), child.attrs.get("value")
                 if name is None or value is None:
                     raise XMLImportError(f"{child.where()}: expected name and value")
-                self.params.setdefault(name, value)
+                if name not in self.params:  # its value may use the defaults above it
+                    self.substitute(child)
+                    self.params[name] = child.attrs["value"]
                 continue
             self.substitute(child)
             if child.tag == "path":
@@ -177,44 +287,88 @@ class _Resolver:
 
     def _include(self, node: Node) -> list[Node]:
         self.depth += 1
-        if self.depth > 16:
-            raise XMLImportError(f"{node.where()}: includes nested more than 16 deep")
-        path = self.find(node, node.attrs.get("filename", ""))
-        scene = _parse_file(path)
+        if self.depth > MAX_INCLUDE_DEPTH:
+            raise XMLImportError(f"{node.where()}: includes nested more than "
+                                 f"{MAX_INCLUDE_DEPTH} deep")
+        self.budget.include(node)
+        path = self.find(node, node.attrs.get("filename"), "an include")
+        scene = _parse_file(path, self.budget.read(path, "the include", node.where()))
         kids = self.expand(scene)
         self.depth -= 1
         return kids
 
-    def find(self, node: Node, name: str) -> Path:
-        """A file named in the scene: absolute, or in a folder of <path> or the scene's."""
+    def find(self, node: Node, name: str | None, what: str = "file") -> Path:
+        """A file named in the scene: absolute, or in a folder of <path> or the scene's
+        (the first that has it, as Mitsuba's resolver), symbolic links followed; it must
+        be a regular file. Files outside the scene's folder are allowed, as in Mitsuba."""
+        if not name:
+            raise XMLImportError(f"{node.where()}: expected a filename")
         p = Path(name)
-        if p.is_absolute():
-            return p
-        for d in self.search:
-            if (d / p).exists():
-                return d / p
-        raise XMLImportError(f"{node.where()}: file {name!r} not found (searched "
-                             + ", ".join(str(d) for d in self.search) + ")")
+        found = p if p.is_absolute() else next(
+            (d / p for d in self.search if os.path.lexists(d / p)), None)
+        if found is None:
+            raise XMLImportError(f"{node.where()}: {what} {_cut(name)} not found (searched "
+                                 + ", ".join(_short(d) for d in self.search[:4])
+                                 + (", ..." if len(self.search) > 4 else "") + ")")
+        return regular_file(found, what, node.where())[0]
 
     def deref(self, node: Node) -> Node:
         if node.tag != "ref":
             return node
         target = self.ids.get(node.attrs.get("id", ""))
         if target is None:
-            raise XMLImportError(f"{node.where()}: no object with id {node.attrs.get('id')!r}")
+            raise XMLImportError(f"{node.where()}: no object with id "
+                                 f"{_cut(node.attrs.get('id', ''))}")
         return target
 
 
 # ---------------------------------------------------------------- values
 
 
-def _floats(node: Node, text: str, n: int | None = None) -> list[float]:
-    try:
-        vals = [float(x) for x in re.split(r"[,\s]+", text.strip()) if x]
-    except ValueError:
-        raise XMLImportError(f"{node.where()}: expected numbers, got {text!r}") from None
+_NUMBER = re.compile(r"[+-]?(\d+\.?\d*|\.\d+)([eE][+-]?\d+)?")
+_INTEGER = re.compile(r"[+-]?\d{1,19}")
+
+
+def _number(node: Node, text, what: str = "") -> float:
+    """A decimal number written in the scene: finite, within float32's range.
+
+    Python's ``float`` would also take "inf", "nan", "1_000" and Unicode digits;
+    a scene's numbers are plain decimals (as Mitsuba reads them), and a value
+    float32 cannot hold is refused here, naming the element, not later."""
+    t = text.strip() if isinstance(text, str) else None
+    label = f"{what} " if what else ""
+    if t is None or not _NUMBER.fullmatch(t):
+        got = "nothing" if not t else _cut(text)
+        raise XMLImportError(f"{node.where()}: expected {label}a finite number, got {got}")
+    v = float(t)
+    if not abs(v) <= FLOAT32_MAX:
+        raise XMLImportError(f"{node.where()}: {label}{_cut(t)} is beyond float32's range "
+                             f"(up to {FLOAT32_MAX:.4g})")
+    return v
+
+
+def _integer(node: Node, text, what: str = "") -> int:
+    """An integer written in the scene: decimal digits only ("1e3" and "2.5" are not), in
+    64 bits (Mitsuba's integer properties)."""
+    t = text.strip() if isinstance(text, str) else None
+    if t is None or not _INTEGER.fullmatch(t) or not -(1 << 63) <= int(t) < (1 << 63):
+        label = f"{what} " if what else ""
+        got = "nothing" if not t else _cut(text)
+        raise XMLImportError(f"{node.where()}: expected {label}an integer, got {got}")
+    return int(t)
+
+
+def _attr_number(node: Node, key: str, default: float) -> float:
+    """The attribute ``key`` of ``node`` as a number; ``default`` where it is absent."""
+    return _number(node, node.attrs[key], key) if key in node.attrs else default
+
+
+def _floats(node: Node, text: str | None, n: int | None = None) -> list[float]:
+    if text is None:
+        raise XMLImportError(f"{node.where()}: expected a value")
+    vals = [_number(node, x) for x in re.split(r"[,\s]+", text.strip()) if x]
     if n is not None and len(vals) != n:
-        raise XMLImportError(f"{node.where()}: expected {n} numbers, got {text!r}")
+        raise XMLImportError(f"{node.where()}: expected {n} numbers, got {_cut(text)}")
     return vals
 
 
@@ -223,7 +377,7 @@ def _xyz(node: Node, default: float = 0.0) -> list[float]:
     if "value" in node.attrs:
         v = _floats(node, node.attrs["value"])
         return v * 3 if len(v) == 1 else _check_len(node, v, 3)
-    return [float(node.attrs.get(k, default)) for k in "xyz"]
+    return [_attr_number(node, k, default) for k in "xyz"]
 
 
 def _check_len(node: Node, v: list, n: int) -> list:
@@ -242,14 +396,14 @@ def transform_matrix(node: Node) -> np.ndarray:
             if "value" in s.attrs:
                 steps.append(tf.scale(_xyz(s)))
             else:
-                steps.append(tf.scale([float(s.attrs.get(k, 1.0)) for k in "xyz"]))
+                steps.append(tf.scale([_attr_number(s, k, 1.0) for k in "xyz"]))
         elif s.tag == "rotate":
-            axis = _xyz(s) if "value" in s.attrs else [float(s.attrs.get(k, 0)) for k in "xyz"]
+            axis = _xyz(s)
             if not any(axis):
                 raise XMLImportError(f"{s.where()}: a rotation needs a non-zero axis")
-            steps.append(tf.rotate(axis, float(s.attrs.get("angle", 0))))
+            steps.append(tf.rotate(axis, _attr_number(s, "angle", 0.0)))
         elif s.tag == "matrix":
-            v = _floats(s, s.attrs.get("value", ""))
+            v = _floats(s, s.attrs.get("value"))
             if len(v) == 9:  # a 3x3 matrix (Mitsuba accepts it for to_uv)
                 m = np.eye(4)
                 m[:3, :3] = np.reshape(v, (3, 3))
@@ -257,8 +411,8 @@ def transform_matrix(node: Node) -> np.ndarray:
                 m = np.reshape(_check_len(s, v, 16), (4, 4))
             steps.append(m)
         elif s.tag == "lookat":
-            origin = _floats(s, s.attrs.get("origin", ""), 3)
-            target = _floats(s, s.attrs.get("target", ""), 3)
+            origin = _floats(s, s.attrs.get("origin"), 3)
+            target = _floats(s, s.attrs.get("target"), 3)
             up = _floats(s, s.attrs.get("up", "0, 1, 0"), 3)
             if np.allclose(origin, target):
                 raise XMLImportError(f"{s.where()}: origin and target are the same point")
@@ -352,12 +506,24 @@ class _Importer:
         return out
 
     def number(self, node: Node | None, default=None):
+        """A <float> or <integer> property: a float or an int (checked: :func:`_number`)."""
         if node is None:
             return default
         if node.tag not in ("float", "integer"):
             raise XMLImportError(f"{node.where()}: expected <float> or <integer>")
-        return float(node.attrs.get("value", "nan")) if node.tag == "float" else \
-            int(node.attrs.get("value"))
+        if node.tag == "integer":
+            return _integer(node, node.attrs.get("value"))
+        return _number(node, node.attrs.get("value"))
+
+    def integer(self, node: Node | None, default: int | None = None) -> int | None:
+        """An <integer> property (a <float> of a whole value is taken too)."""
+        v = self.number(node, default)
+        if isinstance(v, float):
+            if v != int(v):
+                raise XMLImportError(f"{node.where()}: expected an integer, got "
+                                     f"{_cut(node.attrs.get('value'))}")
+            v = int(v)
+        return v
 
     def string(self, node: Node | None, default=None):
         return default if node is None else node.attrs.get("value", "")
@@ -376,14 +542,19 @@ class _Importer:
             vals = _floats(node, node.attrs.get("value", ""))
             return vals * 3 if len(vals) == 1 else _check_len(node, vals, 3)
         if node.tag in ("float", "integer"):
-            return [float(node.attrs.get("value"))] * 3
+            return [float(self.number(node))] * 3
         if node.tag == "spectrum":
             if "filename" in node.attrs:
                 self.outside(node, "a spectrum from a file (spectral-only input)", None, where)
             v = node.attrs.get("value", "")
             if ":" in v:
                 pairs = [p.split(":") for p in re.split(r",\s*", v.strip()) if p]
-                vals = [float(b) for _, b in pairs]
+                if any(len(pair) != 2 for pair in pairs):
+                    raise XMLImportError(f"{node.where()}: expected wavelength:value pairs, "
+                                         f"got {_cut(v)}")
+                for wavelength, _ in pairs:
+                    _number(node, wavelength, "a wavelength as")
+                vals = [_number(node, b) for _, b in pairs]
                 self.outside(node, "a spectrum given per wavelength (spectral-only input)",
                              "its mean over wavelengths, as a grey", where)
                 return [sum(vals) / len(vals)] * 3
@@ -408,14 +579,14 @@ class _Importer:
             return {"checkerboard": tex}
         if node.type == "bitmap":
             fname = self.string(p.get("filename"))
-            bm = {"filename": str(self.res.find(node, fname))}
+            bm = {"filename": str(self.res.find(node, fname, "image"))}
             for k in ("filter_type", "wrap_mode"):
                 if k in p:
                     bm[k] = self.string(p[k])
             if "raw" in p:
                 bm["raw"] = self.boolean(p["raw"])
             return {"bitmap": bm}
-        self.outside(node, f'texture "{node.type}"', None, where)
+        self.outside(node, f'texture "{_short(node.type)}"', None, where)
 
     def to_world(self, node: Node | None) -> list:
         """A to_world as a list of steps: the XML's own translate/rotate/scale steps in its
@@ -428,12 +599,10 @@ class _Importer:
                 steps.append({"translate": _xyz(s)})
             elif s.tag == "scale":
                 v = _xyz(s) if "value" in s.attrs else \
-                    [float(s.attrs.get(k, 1.0)) for k in "xyz"]
+                    [_attr_number(s, k, 1.0) for k in "xyz"]
                 steps.append({"scale": v[0] if len(set(v)) == 1 else v})
             elif s.tag == "rotate":
-                axis = _xyz(s) if "value" in s.attrs else \
-                    [float(s.attrs.get(k, 0)) for k in "xyz"]
-                steps.append({"rotate": {"axis": axis, "angle": float(s.attrs.get("angle", 0))}})
+                steps.append({"rotate": {"axis": _xyz(s), "angle": _attr_number(s, "angle", 0.0)}})
             else:
                 break
         else:
@@ -447,7 +616,7 @@ class _Importer:
         if node.tag == "string":
             name = node.attrs.get("value", "").strip().lower()
             if name not in IOR:
-                raise XMLImportError(f"{node.where()}: unknown IOR name {name!r} (known: "
+                raise XMLImportError(f"{node.where()}: unknown IOR name {_cut(name)} (known: "
                                      + ", ".join(IOR) + ")")
             self.note(where, f"{node.attrs.get('name')} = \"{name}\": Mitsuba's table "
                              f"({IOR[name]})")
@@ -457,7 +626,7 @@ class _Importer:
     # -------------------------------------------------------------- scene
 
     def run(self) -> Imported:
-        scene = _parse_file(self.path)
+        scene = _parse_file(self.path, self.res.budget.read(self.path, "", str(self.path)))
         self.res.substitute(scene)
         children = self.res.expand(scene)
         sensors = [c for c in children if c.tag == "sensor"]
@@ -508,7 +677,10 @@ class _Importer:
         if node.type == "direct":
             film["max_depth"] = 2
         elif node.type in ("path", "whitted"):
-            depth = self.number(p.get("max_depth"), -1)
+            depth = self.integer(p.get("max_depth"), -1)
+            if depth < -1:
+                raise XMLImportError(f"{p['max_depth'].where()}: expected -1 (unbounded) or "
+                                     f"a max_depth of at least 0, got {depth}")
             if depth < 0:
                 film["max_depth"] = 8
                 self.note("film", "max_depth -1 (unbounded) becomes 8 specular bounces")
@@ -518,9 +690,9 @@ class _Importer:
                 self.note("film", "Mitsuba's path integrator also follows diffuse bounces; "
                                   "Whitted's tracer follows only specular ones")
         else:
-            self.outside(node, f'integrator "{node.type}"', "Whitted's (max_depth as given)",
-                         "film")
-            film["max_depth"] = int(self.number(p.get("max_depth"), 2))
+            self.outside(node, f'integrator "{_short(node.type)}"',
+                         "Whitted's (max_depth as given)", "film")
+            film["max_depth"] = self.integer(p.get("max_depth"), 2)
 
     def sensor(self, node: Node) -> None:
         p = self.props(node)
@@ -531,7 +703,7 @@ class _Importer:
                          "camera")
             kind = "perspective"
         if kind not in ("perspective", "orthographic"):
-            self.outside(node, f'sensor "{kind}"', None, "camera")
+            self.outside(node, f'sensor "{_short(kind)}"', None, "camera")
         cam["type"] = kind
         film = [c for c in node.children if c.tag == "film"]
         sampler = [c for c in node.children if c.tag == "sampler"]
@@ -541,8 +713,8 @@ class _Importer:
                          p["to_world"].children[0].tag == "lookat")
         if single_lookat:  # the common case, in the scene format's own words
             la = p["to_world"].children[0]
-            cam["origin"] = _floats(la, la.attrs["origin"], 3)
-            cam["target"] = _floats(la, la.attrs["target"], 3)
+            cam["origin"] = _floats(la, la.attrs.get("origin"), 3)
+            cam["target"] = _floats(la, la.attrs.get("target"), 3)
             cam["up"] = _floats(la, la.attrs.get("up", "0, 1, 0"), 3)
             if kind == "orthographic":  # Mitsuba's view: [-1, 1] across, unscaled
                 cam["width"] = 2.0
@@ -559,7 +731,11 @@ class _Importer:
                 cam["fov_axis"] = self.string(p.get("fov_axis"), "x").lower()
             else:  # Mitsuba: a 35 mm film's diagonal (36 x 24 mm) at this focal length
                 text = self.string(p.get("focal_length"), "50mm")
-                f = float(text.lower().removesuffix("mm"))
+                f = _number(p.get("focal_length") or node, text.lower().removesuffix("mm"),
+                            "focal_length")
+                if f <= 0:
+                    raise XMLImportError(f"{node.where()}: expected a positive focal_length, "
+                                         f"got {_cut(text)}")
                 cam["fov"] = math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * f)))
                 cam["fov_axis"] = "diagonal"
                 self.note("camera", f"focal_length {text}: the diagonal field of view of a "
@@ -574,9 +750,9 @@ class _Importer:
         film = self.out["film"]
         p = self.props(node) if node is not None else {}
         if node is not None and node.type != "hdrfilm":
-            self.outside(node, f'film "{node.type}"', "hdrfilm", "film")
-        film["width"] = int(self.number(p.get("width"), 768))
-        film["height"] = int(self.number(p.get("height"), 576))
+            self.outside(node, f'film "{_short(node.type)}"', "hdrfilm", "film")
+        film["width"] = self.integer(p.get("width"), 768)
+        film["height"] = self.integer(p.get("height"), 576)
         for k in ("crop_width", "crop_height", "crop_offset_x", "crop_offset_y"):
             if k in p:
                 self.outside(p[k], "a cropped film", None, "film")
@@ -588,7 +764,7 @@ class _Importer:
             film["filter"] = "box"
         else:
             if rtype != "gaussian":
-                self.outside(rf[0], f'pixel filter "{rtype}"', "a gaussian (stddev 0.5)",
+                self.outside(rf[0], f'pixel filter "{_short(rtype)}"', "a gaussian (stddev 0.5)",
                              "film")
             film["filter"] = "gaussian"
             stddev = self.number(self.props(rf[0]).get("stddev"), 0.5) if rf and \
@@ -599,7 +775,10 @@ class _Importer:
     def sampler(self, node: Node | None) -> None:
         film = self.out["film"]
         p = self.props(node) if node is not None else {}
-        count = int(self.number(p.get("sample_count"), 4))
+        count = self.integer(p.get("sample_count"), 4)
+        if count < 1:
+            raise XMLImportError(f"{p['sample_count'].where()}: expected a sample_count of at "
+                                 f"least 1, got {count}")
         n = math.isqrt(count)
         if n * n != count:
             n += 1
@@ -610,8 +789,8 @@ class _Importer:
             film["jitter"] = bool(self.boolean(p.get("jitter"), True))
         else:
             film["jitter"] = True
-            self.note("film", f'sampler "{kind}": jittered strata (the same expected image, '
-                              "another noise)")
+            self.note("film", f'sampler "{_short(kind)}": jittered strata (the same expected '
+                              "image, another noise)")
 
     # -------------------------------------------------------------- BSDFs
 
@@ -637,9 +816,9 @@ class _Importer:
         if kind in APPROXIMATIONS and APPROXIMATIONS[kind] is not None:
             nearest, lost = APPROXIMATIONS[kind]
             if nearest == "inner":
-                self.outside(node, f'a "{kind}" BSDF', "the BSDF it wraps", where)
+                self.outside(node, f'a "{_short(kind)}" BSDF', "the BSDF it wraps", where)
                 return self.bsdf(self._inner(node), where, two_sided)
-            self.outside(node, f'a "{kind}" BSDF ({lost.split(" (")[0]} lost)',
+            self.outside(node, f'a "{_short(kind)}" BSDF ({lost.split(" (")[0]} lost)',
                          f'a smooth "{nearest}"', where)
             if nearest == "diffuse":
                 colour = p.get("base_color") or p.get("reflectance")
@@ -648,7 +827,7 @@ class _Importer:
                                    two_sided)
             kind = nearest
         if kind not in BSDFS:
-            self.outside(node, f'a "{kind}" BSDF', None, where)
+            self.outside(node, f'a "{_short(kind)}" BSDF', None, where)
         return getattr(self, BSDFS[kind])(node, p, where, two_sided)
 
     def _inner(self, node: Node) -> Node:
@@ -743,7 +922,7 @@ class _Importer:
         if node.type == "area":
             raise XMLImportError(f"{node.where()}: an area emitter belongs inside a <shape>")
         if node.type not in LIGHTS:
-            self.outside(node, f'emitter "{node.type}"', None, where)
+            self.outside(node, f'emitter "{_short(node.type)}"', None, where)
         m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
         self.out["lights"].append(getattr(self, LIGHTS[node.type])(node, p, m, where))
 
@@ -774,7 +953,7 @@ class _Importer:
 
     def _envmap(self, node, p, m, where):
         light = {"type": "envmap",
-                 "filename": str(self.res.find(node, self.string(p.get("filename"))))}
+                 "filename": str(self.res.find(node, self.string(p.get("filename")), "image"))}
         if "scale" in p:
             light["scale"] = float(self.number(p["scale"]))
         if "to_world" in p:
@@ -829,7 +1008,7 @@ class _Importer:
                 shape["radius"] = float(self.number(p["radius"]))
         elif kind in ("obj", "ply"):
             shape["type"] = "mesh"
-            shape["file"] = str(self.res.find(node, self.string(p.get("filename"))))
+            shape["file"] = str(self.res.find(node, self.string(p.get("filename")), "mesh file"))
             shape["smooth"] = not self.boolean(p.get("face_normals"), False)
             triangle = _single_triangle(Path(shape["file"]))
             if triangle is not None and not shape["smooth"]:  # one flat face: a triangle
@@ -837,9 +1016,16 @@ class _Importer:
             if self.boolean(p.get("flip_normals"), False):
                 self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
         elif kind == "serialized" and self.convert is not None:
-            source = self.res.find(node, self.string(p.get("filename")))
+            source = self.res.find(node, self.string(p.get("filename")), "serialized mesh")
+            index = self.integer(p.get("shape_index"), 0)
+            if index < 0:
+                raise XMLImportError(f"{node.where()}: expected a shape_index of at least 0, "
+                                     f"got {index}")
             shape["type"] = "mesh"
-            shape["file"] = str(self.convert(source, int(self.number(p.get("shape_index"), 0))))
+            try:
+                shape["file"] = str(self.convert(source, index))
+            except UserError as e:  # the file is not a mesh Mitsuba reads, or too large
+                raise XMLImportError(f"{node.where()}: {e}") from None
             shape["smooth"] = not self.boolean(p.get("face_normals"), False)
             self.note(where, f"serialized mesh {source.name} converted by Mitsuba to "
                              f"{Path(shape['file']).name}")
@@ -847,7 +1033,7 @@ class _Importer:
             self.outside(node, "a serialized mesh (`whitted import` converts it through "
                                "Mitsuba; render the imported TOML)", None, where)
         else:
-            self.outside(node, f'shape "{kind}"', None, where)
+            self.outside(node, f'shape "{_short(kind)}"', None, where)
         if "flip_normals" in p and kind != "obj" and kind != "ply" and \
                 self.boolean(p["flip_normals"], False):
             self.outside(p["flip_normals"], "flip_normals", None, where)
@@ -864,7 +1050,7 @@ class _Importer:
         if emitters:
             e = emitters[0]
             if e.type != "area":
-                self.outside(e, f'emitter "{e.type}" on a shape', None, where)
+                self.outside(e, f'emitter "{_short(e.type)}" on a shape', None, where)
             shape["emitter"] = {"radiance": self.color(self.props(e).get("radiance"), where,
                                                        [1.0] * 3)}
             if not bsdfs:
