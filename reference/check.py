@@ -772,25 +772,58 @@ def side_by_side(image: np.ndarray, reference: np.ndarray, failing: np.ndarray, 
     plt.close(fig)
 
 
-def write_outputs(run: CheckRun, outdir, title: str) -> dict:
-    """diff.png, side_by_side.png, reference.exr, check.json and check.html in ``outdir``."""
+#: What ``whitted check`` writes into its output folder.
+OUTPUT_NAMES = ("diff.png", "side_by_side.png", "reference.exr", "check.json", "check.html")
+
+
+def refuse_in_the_way(folder, names) -> None:
+    """Refuse, before any work, an output folder where a folder stands in an output's place.
+
+    Outputs are moved into place by renaming, which replaces a file or a
+    symbolic link but not a folder: found only then, it would leave half the
+    outputs moved.
+    """
+    import os
+    from pathlib import Path
+
+    from tracer.errors import UserError
+
+    for n in names:
+        p = Path(folder) / n
+        if os.path.isdir(p) and not os.path.islink(p):
+            raise UserError(f"{p}: is a folder, where an output file goes")
+
+
+def write_outputs(run: CheckRun, outdir, title: str, final=None) -> dict:
+    """diff.png, side_by_side.png, reference.exr, check.json and check.html in ``outdir``.
+
+    ``final`` is the folder the files will be moved to (``outdir`` where not
+    given), as recorded in ``check.json``. An error of the operating system
+    (a full disk) is one line naming ``final``; the caller removes what was
+    written (``whitted check`` writes into a :class:`tracer.imageio.StagedFolder`).
+    """
     from pathlib import Path
 
     from reference.compare import heat_map, pixel_relative_difference, write_json
+    from tracer.errors import UserError
     from tracer.imageio import write_exr
 
     out = Path(outdir)
-    out.mkdir(parents=True, exist_ok=True)
-    a = run.result.arrays
-    rel = pixel_relative_difference(a["image"], a["reference"])
-    heat_map(rel, out / "diff.png", f"{run.scene}: {Path(run.image_path).name} against the "
-                                    "reference", label="|image - reference| / reference")
-    side_by_side(a["image"], a["reference"], a["failing"], out / "side_by_side.png")
-    write_exr(out / "reference.exr", a["reference"])
-    run.files = {k: str(out / k) for k in ("diff.png", "side_by_side.png", "reference.exr",
-                                            "check.json", "check.html")}
-    write_json(out / "check.json", run.to_json())
-    (out / "check.html").write_text(check_page(run, title, (out / "diff.png").read_bytes()))
+    run.files = {k: str(Path(final or out) / k) for k in OUTPUT_NAMES}
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        a = run.result.arrays
+        rel = pixel_relative_difference(a["image"], a["reference"])
+        heat_map(rel, out / "diff.png", f"{run.scene}: {Path(run.image_path).name} against "
+                                        "the reference", label="|image - reference| / reference")
+        side_by_side(a["image"], a["reference"], a["failing"], out / "side_by_side.png")
+        write_exr(out / "reference.exr", a["reference"])
+        write_json(out / "check.json", run.to_json())
+        (out / "check.html").write_text(check_page(run, title, (out / "diff.png").read_bytes()))
+    except OSError as e:
+        raise UserError(f"{final or out}: cannot write: {e.strerror or e}") from None
+    except UserError as e:   # tracer.imageio's, naming the staging folder
+        raise UserError(str(e).replace(str(out), str(final or out))) from None
     return run.files
 
 

@@ -774,14 +774,22 @@ def cmd_check(args) -> int:
             raise UserError(f"--mitsuba: an emitter of {scene.name} has no shared light "
                             "samples (reference.deterministic.SAMPLE_MAPS), so Mitsuba's "
                             "deterministic reference cannot render it")
+    from reference.check import OUTPUT_NAMES, refuse_in_the_way
+    from tracer.imageio import StagedFolder
+
     outdir = output_folder(args.output or Path("out") / "check" /
                            f"{scene.name}-{Path(args.image).stem}")
-    _backend(args)
-    run = check_image(user, scene, args.spp, th, mitsuba=args.mitsuba, seed=args.seed,
-                      suspects=not args.no_suspects, log=lambda m: print(m + " ...", flush=True))
-    title = (f"{shown(args.image)} against {scene.name} ({_describe(scene)}), read as "
-             f"{user.storage}")
-    write_outputs(run, outdir, title)
+    refuse_in_the_way(outdir, OUTPUT_NAMES)
+    # All five files or none: an error, a full disk or Ctrl-C leaves no partial output.
+    with StagedFolder(outdir) as staged:
+        _backend(args)
+        run = check_image(user, scene, args.spp, th, mitsuba=args.mitsuba, seed=args.seed,
+                          suspects=not args.no_suspects,
+                          log=lambda m: print(m + " ...", flush=True))
+        title = (f"{shown(args.image)} against {scene.name} ({_describe(scene)}), read as "
+                 f"{user.storage}")
+        write_outputs(run, staged.path, title, final=outdir)
+        staged.commit()
     print(format_run(run, title))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in run.files.values()))
     return EXIT_OK if run.passed else EXIT_FAIL
@@ -829,22 +837,34 @@ def cmd_suite(args) -> int:
 
         if args.encoding not in ENCODINGS:
             raise UserError(f"--encoding: expected one of {', '.join(ENCODINGS)}")
-    out = output_folder(args.output or images / "whitted-check")
-    _backend(args)
-    result = suite.grade(images, suite_dir, args.scenes, args.encoding, args.spp, th,
-                         log=lambda m: print(m, flush=True))
-    out.mkdir(parents=True, exist_ok=True)
-    from reference.compare import write_json
+    from reference.check import refuse_in_the_way
+    from tracer.imageio import StagedFolder
 
-    write_json(out / "suite.json", result.to_json())
-    (out / "index.html").write_text(suite.suite_page(result))
+    # Everything read and checked before any rendering: the manifest, its paths, and
+    # that every file the command will write can be written.
+    chosen = suite.load_suite(suite_dir, args.scenes)
+    out = output_folder(args.output or images / "whitted-check")
+    refuse_in_the_way(out, suite.OUTPUT_NAMES)
+    if args.update:
+        suite.check_update_targets(chosen)
+    # All outputs or none: the report and the new references are written beside their
+    # places and moved there only when all are complete.
+    with StagedFolder(out) as staged, suite.PendingFiles() as pending:
+        _backend(args)
+        result = suite.grade(images, chosen, args.scenes, args.encoding, args.spp, th,
+                             log=lambda m: print(m, flush=True))
+        suite.write_outputs(result, staged.path)
+        files = []
+        if args.update and result.passed:
+            files = suite.stage_references(result, chosen, pending)
+        pending.commit()
+        staged.commit()
     print(suite.format_suite(result))
     print(f"wrote {shown(out)}/index.html, suite.json")
     if args.update:
         if not result.passed:
             print("references not updated: the run fails (fix the failing scenes first)")
             return EXIT_FAIL
-        files = suite.update_references(result, suite_dir)
         print(f"updated {len(files)} reference(s) in {shown(suite_dir)}/references/")
     return EXIT_OK if result.passed else EXIT_FAIL
 

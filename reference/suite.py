@@ -24,6 +24,12 @@ which :func:`reference.check.footprint_factor` scales) and ``quadrature``
 suite folder (``--suite``) or, without one, against references rendered now.
 ``--update`` stores the graded images as the suite's references (a renderer
 developer's golden images), and refuses to when any scene fails.
+
+A suite folder is input from anyone, so ``manifest.json`` is read as such
+(:func:`read_manifest`): a regular file of at most :data:`MAX_MANIFEST_BYTES`,
+nested at most :data:`MAX_MANIFEST_NESTING` deep, every field the commands use of
+the type :func:`validate_manifest` expects, and every path in it relative and,
+symbolic links resolved, inside the suite (:func:`safe_member`), before any work.
 """
 
 from __future__ import annotations
@@ -31,10 +37,14 @@ from __future__ import annotations
 import datetime as _dt
 import fnmatch
 import json
+import math
 import os
+import re
 import shutil
+import stat
+import tempfile
 from dataclasses import dataclass, field
-from pathlib import Path
+from pathlib import Path, PurePosixPath
 
 import numpy as np
 
@@ -183,28 +193,72 @@ def write_reference(path: Path, image: np.ndarray, variance: np.ndarray | None,
     write_exr(path, image, layers)
 
 
+#: Largest reference EXR read from a suite (a 4K image with its four layers is 400 MB).
+MAX_REFERENCE_BYTES = 1 << 30
+
+
+def _regular_file(path: Path, what: str, limit: int) -> os.stat_result:
+    """``path``'s status if it is a regular file of at most ``limit`` bytes (no FIFO, device)."""
+    from tracer.errors import UserError
+
+    try:
+        st = os.stat(path)
+    except OSError as e:
+        raise UserError(f"{path}: cannot read {what}: {e.strerror or e}") from None
+    if not stat.S_ISREG(st.st_mode):
+        raise UserError(f"{path}: not a regular file ({what})")
+    if st.st_size > limit:
+        raise UserError(f"{path}: larger than {limit:,} bytes ({what})")
+    return st
+
+
 def read_reference(path: Path, name: str):
-    """A stored reference EXR as a :class:`reference.check.Reference`."""
+    """A stored reference EXR as a :class:`reference.check.Reference`; one-line errors.
+
+    R, G, B must be finite; the ``variance``, ``spread`` and ``quadrature``
+    layers, where present, finite and not negative, all of one size.
+    """
     from reference.check import Reference
+    from tracer.errors import UserError, one_line
     from tracer.imageio import read_exr_channels
 
-    ch, _ = read_exr_channels(path)
+    _regular_file(path, "a reference EXR", MAX_REFERENCE_BYTES)
+    try:
+        ch, _ = read_exr_channels(path)
+    except OSError as e:
+        raise UserError(f"{path}: cannot read a reference EXR: {e.strerror or e}") from None
+    except (RuntimeError, ValueError, TypeError, KeyError, EOFError) as e:
+        raise UserError(f"{path}: not a reference EXR (unreadable: "
+                        f"{one_line(str(e), 120) or type(e).__name__})") from None
 
     def layer(prefix):
         names = [f"{prefix}{c}" for c in "RGB"]
         if not all(n in ch for n in names):
             return None
-        return np.stack([ch[n].astype(np.float64) for n in names], axis=-1)
+        planes = [np.asarray(ch[n]) for n in names]
+        if any(pl.ndim != 2 or pl.shape != planes[0].shape or pl.size == 0 for pl in planes):
+            raise UserError(f"{path}: not a reference EXR ({prefix or 'R, G, B'} channels of "
+                            "different sizes)")
+        a = np.stack([pl.astype(np.float64) for pl in planes], axis=-1)
+        # A variance, spread or quadrature bound is never negative.
+        if not np.isfinite(a).all() or (prefix and (a < 0).any()):
+            what = prefix.rstrip(".") or "R, G, B"
+            raise UserError(f"{path}: not a reference EXR ({what}: values that are not "
+                            f"finite{' or below 0' if prefix else ''})")
+        return a
 
     image = layer("")
     if image is None:
-        from tracer.errors import UserError
-
         raise UserError(f"{path}: not a reference EXR (no R, G, B channels)")
-    var = layer("variance.")
+    extra = {p: layer(f"{p}.") for p in ("variance", "spread", "quadrature")}
+    for p, a in extra.items():
+        if a is not None and a.shape != image.shape:
+            raise UserError(f"{path}: not a reference EXR (its {p} layer is not the image's "
+                            "size)")
+    var = extra["variance"]
     if var is not None and not var.any():
         var = None
-    return Reference(image, var, name, 1, layer("spread."), layer("quadrature."))
+    return Reference(image, var, name, 1, extra["spread"], extra["quadrature"])
 
 
 def export(outdir: Path, scene_paths: list[Path], log=print) -> dict:
@@ -279,6 +333,250 @@ def manifest_markdown(manifest: dict) -> str:
     return "\n".join(lines)
 
 
+# ---------------------------------------------------------------- a suite folder, read safely
+
+#: Largest manifest.json read (the 27 built-in scenes' manifest is about 60 KB).
+MAX_MANIFEST_BYTES = 16 << 20
+#: Deepest nesting of objects and lists in a manifest (export writes four levels).
+MAX_MANIFEST_NESTING = 16
+#: A scene's name: it names the image looked for, so no path separator and no "..".
+SCENE_NAME = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.+-]{0,127}")
+
+
+def safe_member(root: Path, relpath, what: str) -> Path:
+    """``root / relpath`` resolved, for a path read from a file in ``root``; refused unless inside.
+
+    A member path is a non-empty relative path without a ``..`` component that,
+    symbolic links resolved, names something strictly inside ``root`` (which
+    need not exist yet). Anything else is refused in one line naming ``what``
+    (the manifest entry), so that no read or write can leave the folder.
+    Returns the resolved path: use it, not the joined one.
+    """
+    from tracer.errors import UserError
+
+    shown = repr(relpath) if not isinstance(relpath, str) or len(relpath) <= 80 \
+        else repr(relpath[:80] + "...")
+
+    def refuse(why: str):
+        raise UserError(f"{what}: {shown}: {why}; paths in a suite are relative and stay "
+                        f"inside {root}")
+
+    if not isinstance(relpath, str) or not relpath:
+        refuse("expected a relative path (a non-empty string)")
+    if "\0" in relpath:
+        refuse("a NUL byte in the path")
+    rel = PurePosixPath(relpath)
+    if rel.is_absolute() or os.path.isabs(relpath):
+        refuse("an absolute path")
+    if ".." in rel.parts:
+        refuse("a '..' component")
+    try:
+        base = Path(root).resolve(strict=True)
+        full = (base / rel).resolve()
+    except (OSError, RuntimeError) as e:  # RuntimeError: a symbolic link loop (Python 3.11)
+        refuse(f"cannot be resolved ({getattr(e, 'strerror', None) or e})")
+    if full == base or base not in full.parents:
+        refuse("leads outside the suite through a symbolic link")
+    return full
+
+
+def read_bounded(path: Path, limit: int, what: str) -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes; a FIFO or device is refused.
+
+    Checked with stat before opening, opened without blocking (a FIFO swapped in
+    meanwhile does not hang) and checked again on the open file.
+    """
+    from tracer.errors import UserError
+
+    _regular_file(path, what, limit)
+    try:
+        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
+        with os.fdopen(fd, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise UserError(f"{path}: not a regular file ({what})")
+            data = f.read(limit + 1)
+    except OSError as e:
+        raise UserError(f"{path}: cannot read {what}: {e.strerror or e}") from None
+    if len(data) > limit:
+        raise UserError(f"{path}: larger than {limit:,} bytes ({what})")
+    return data
+
+
+def _kind(v) -> str:
+    return {dict: "an object", list: "a list", str: "a string", bool: "true or false",
+            int: "an integer", float: "a number", type(None): "null"}.get(type(v), "a value")
+
+
+def _nesting(data) -> int:
+    """How deeply objects and lists nest in ``data`` (walked without recursion)."""
+    deepest, stack = 0, [(data, 0)]
+    while stack:
+        v, depth = stack.pop()
+        deepest = max(deepest, depth)
+        if depth <= MAX_MANIFEST_NESTING:
+            stack.extend((x, depth + 1) for x in (v.values() if isinstance(v, dict) else
+                                                  v if isinstance(v, list) else ()))
+    return deepest
+
+
+def validate_manifest(data, mf: Path, root: Path) -> list[dict]:
+    """Check a parsed manifest's structure (module docstring); return its scene entries.
+
+    Every field a command reads is required with its type; the fields export
+    writes but nothing reads (``description``, ``depth``, ``tracer_only``,
+    ``reference``, ``date``) are checked when present. Every path is checked by
+    :func:`safe_member`. Errors name the entry: ``scenes[3] (glass_sphere) files.scene``.
+    """
+    from tracer.errors import UserError
+
+    def bad(where: str, expected: str, v) -> None:
+        raise UserError(f"{mf}: {where}: expected {expected}, got {_kind(v)}; not a whitted "
+                        "suite manifest (`whitted suite export` writes one)")
+
+    def need(obj: dict, key: str, where: str, types, expected: str, required: bool = True):
+        if key not in obj:
+            if required:
+                raise UserError(f"{mf}: {where}: no {key!r}; not a whitted suite manifest")
+            return None
+        v = obj[key]
+        if not isinstance(v, types) or isinstance(v, bool):
+            bad(f"{where} {key}", expected, v)
+        return v
+
+    def strings(v, where: str) -> None:
+        for i, x in enumerate(v):
+            if not isinstance(x, str):
+                bad(f"{where}[{i}]", "a string", x)
+
+    if not isinstance(data, dict):
+        bad("the document", "a JSON object", data)
+    version = data.get("whitted_suite")
+    if type(version) is not int or version != 1:
+        raise UserError(f"{mf}: not a whitted suite manifest (\"whitted_suite\": 1 missing)")
+    need(data, "date", "the document", str, "a string", required=False)
+    entries = need(data, "scenes", "the document", list, "a list")
+    names = set()
+    for i, e in enumerate(entries):
+        where = f"scenes[{i}]"
+        if not isinstance(e, dict):
+            bad(where, "an object", e)
+        name = need(e, "name", where, str, "a string")
+        if not SCENE_NAME.fullmatch(name):
+            raise UserError(f"{mf}: {where} name: {name[:80]!r} is not a scene name (letters, "
+                            "digits, '_', '.', '+', '-'; at most 128)")
+        if name in names:
+            raise UserError(f"{mf}: {where} name: {name!r} appears twice")
+        names.add(name)
+        where = f"{where} ({name})"
+        for key in ("description",):
+            need(e, key, where, str, "a string", required=False)
+        for key in ("depth", "spp", "max_depth"):
+            need(e, key, where, int, "an integer", required=key != "depth")
+        size = need(e, "size", where, list, "a list")
+        if len(size) != 2 or not all(type(x) is int and x > 0 for x in size):
+            raise UserError(f"{mf}: {where} size: expected [width, height], two integers > 0")
+        for key, values in need(e, "tests", where, dict, "an object").items():
+            if not isinstance(values, list):
+                bad(f"{where} tests.{key}", "a list", values)
+            strings(values, f"{where} tests.{key}")
+        for j, f in enumerate(need(e, "formulas", where, list, "a list")):
+            if not isinstance(f, dict):
+                bad(f"{where} formulas[{j}]", "an object", f)
+            for key in ("formula", "topic"):
+                need(f, key, f"{where} formulas[{j}]", str, "a string")
+        for key, v in need(e, "light_paths", where, dict, "an object").items():
+            if type(v) not in (int, float) or not math.isfinite(v):
+                bad(f"{where} light_paths.{key}", "a finite number", v)
+        strings(need(e, "tracer_only", where, list, "a list", required=False) or [],
+                f"{where} tracer_only")
+        need(e, "reference", where, dict, "an object", required=False)
+        files = need(e, "files", where, dict, "an object")
+        for key, suffix in (("scene", ".toml"), ("reference_exr", ".exr"),
+                            ("reference_png", ".png")):
+            rel = need(files, key, f"{where} files", str, "a string")
+            if not rel.lower().endswith(suffix):
+                raise UserError(f"{mf}: {where} files.{key}: {rel[:80]!r} does not end in "
+                                f"{suffix}")
+            safe_member(root, rel, f"{mf}: {where} files.{key}")
+        for key in ("meshes", "mitsuba"):
+            for j, rel in enumerate(need(files, key, f"{where} files", list, "a list",
+                                         required=False) or []):
+                safe_member(root, rel, f"{mf}: {where} files.{key}[{j}]")
+    return entries
+
+
+def read_manifest(suite_dir: Path) -> dict:
+    """A suite folder's ``manifest.json``, read and validated (module docstring)."""
+    from tracer.errors import UserError
+
+    mf = suite_dir / "manifest.json"
+    if not os.path.lexists(mf):
+        raise UserError(f"{suite_dir}: not a suite folder (no {mf.name}; `whitted suite "
+                        "export` writes one)")
+    raw = read_bounded(mf, MAX_MANIFEST_BYTES, "a suite manifest")
+
+    def no_constant(name):   # NaN and Infinity are not JSON (RFC 8259)
+        raise ValueError(f"{name} is not JSON")
+
+    try:
+        data = json.loads(raw, parse_constant=no_constant)
+    except RecursionError:
+        raise UserError(f"{mf}: nested too deeply (a manifest needs "
+                        f"{MAX_MANIFEST_NESTING} levels at most)") from None
+    except ValueError as e:   # UnicodeDecodeError and JSONDecodeError among them
+        from tracer.errors import one_line
+
+        raise UserError(f"{mf}: not a whitted suite manifest (not JSON: "
+                        f"{one_line(str(e), 120)})") from None
+    if _nesting(data) > MAX_MANIFEST_NESTING:
+        raise UserError(f"{mf}: nested more than {MAX_MANIFEST_NESTING} levels deep; a manifest "
+                        "needs far fewer")
+    validate_manifest(data, mf, suite_dir)
+    return data
+
+
+@dataclass
+class SuiteEntry:
+    """One scene to grade: its scene file, and the suite's stored reference (or None)."""
+    name: str
+    scene: Path
+    reference_exr: Path | None = None
+    reference_png: Path | None = None
+    #: its place in the manifest's ``scenes``
+    index: int = -1
+
+
+@dataclass
+class Suite:
+    """The scenes to grade: a validated suite folder's, or (``folder`` None) the built-in ones."""
+    folder: Path | None
+    manifest: dict | None
+    entries: list[SuiteEntry]
+
+
+def load_suite(suite_dir: Path | None, pattern: str | None = None) -> Suite:
+    """The scenes of a suite folder (validated, paths resolved) or the built-in scenes."""
+    if suite_dir is None:
+        from reference.cli import builtin_scenes
+
+        return Suite(None, None, [SuiteEntry(p.stem, p)
+                                  for p in select(builtin_scenes(), pattern)])
+    manifest = read_manifest(suite_dir)
+    root = Path(suite_dir).resolve()
+    mf = suite_dir / "manifest.json"
+    entries = []
+    for i, e in enumerate(manifest["scenes"]):
+        name = e["name"]
+        if pattern and not fnmatch.fnmatch(name, pattern):
+            continue
+        where = f"{mf}: scenes[{i}] ({name}) files"
+        files = e["files"]
+        entries.append(SuiteEntry(
+            name, *(safe_member(root, files[k], f"{where}.{k}")
+                    for k in ("scene", "reference_exr", "reference_png")), index=i))
+    return Suite(Path(suite_dir), manifest, entries)
+
+
 # ---------------------------------------------------------------- grading
 
 
@@ -290,9 +588,10 @@ class Graded:
     status: str                      # "pass", "FAIL", "missing", "error"
     message: str = ""
     run: object = None               # reference.check.CheckRun
-    #: the scene and reference (for --update and the page)
+    #: the scene, image and stored reference (for --update and the page)
     scene: object = None
     user: object = None
+    reference: object = None
 
 
 @dataclass
@@ -310,33 +609,6 @@ class SuiteResult:
                            for g in self.graded]}
 
 
-def load_suite(suite_dir: Path | None, pattern: str | None):
-    """(name, scene path, stored reference path or None) for each scene to grade."""
-    from tracer.errors import UserError
-
-    if suite_dir is None:
-        from reference.cli import builtin_scenes
-
-        return [(p.stem, p, None) for p in select(builtin_scenes(), pattern)]
-    mf = suite_dir / "manifest.json"
-    try:
-        manifest = json.loads(mf.read_text())
-        entries = manifest["scenes"]
-    except OSError as e:
-        raise UserError(f"{suite_dir}: not a suite folder ({mf.name}: "
-                        f"{e.strerror or e}; `whitted suite export` writes one)") from None
-    except (ValueError, KeyError, TypeError):
-        raise UserError(f"{mf}: not a whitted suite manifest") from None
-    out = []
-    for e in entries:
-        name = e["name"]
-        if pattern and not fnmatch.fnmatch(name, pattern):
-            continue
-        out.append((name, suite_dir / e["files"]["scene"],
-                    suite_dir / e["files"]["reference_exr"]))
-    return out
-
-
 def find_image(folder: Path, name: str) -> tuple[Path | None, str]:
     found = [folder / f"{name}{ext}" for ext in IMAGE_EXTENSIONS
              if (folder / f"{name}{ext}").is_file()]
@@ -345,24 +617,45 @@ def find_image(folder: Path, name: str) -> tuple[Path | None, str]:
     return (found[0], "") if found else (None, "no image")
 
 
-def grade(images: Path, suite_dir: Path | None, pattern: str | None = None,
+def _stored_reference(entry: SuiteEntry, scene):
+    """The entry's stored reference, checked against the scene's film (one-line errors)."""
+    from tracer.errors import UserError
+
+    ref = read_reference(entry.reference_exr, "stored reference")
+    w, h = scene.film.width, scene.film.height
+    if ref.image.shape != (h, w, 3):
+        raise UserError(f"the stored reference {entry.reference_exr.name} of {entry.name} is "
+                        f"{ref.image.shape[1]}x{ref.image.shape[0]}, the scene's film {w}x{h}")
+    return ref
+
+
+def grade(images: Path, suite: Suite | Path | None, pattern: str | None = None,
           encoding: str | None = None, spp: int | None = None, thresholds=None,
           log=print) -> SuiteResult:
-    """Grade every scene's image in ``images``; missing and unreadable images fail."""
+    """Grade every scene's image in ``images``; missing and unreadable images fail.
+
+    The scenes and the stored references are all read and checked before any
+    rendering: a bad suite is bad input (one line), not a failing scene.
+    """
     from reference.check import check_image
     from reference.user_image import read_user_image
     from tracer import load_scene
     from tracer.errors import UserError
 
-    entries = load_suite(suite_dir, pattern)
-    if not entries:
+    if not isinstance(suite, Suite):
+        suite = load_suite(suite, pattern)
+    if not suite.entries:
         raise UserError(f"no scene to grade{f' matches {pattern!r}' if pattern else ''}")
-    scenes = [(name, load_scene(path), ref) for name, path, ref in entries]
-    known = {name for name, _, _ in scenes}
-    result = SuiteResult(True, suite=None if suite_dir is None else str(suite_dir))
+    scenes = [(e, load_scene(e.scene)) for e in suite.entries]
+    for e, scene in scenes:
+        if e.reference_exr is not None:
+            _stored_reference(e, scene)   # read again below, one at a time
+    known = {e.name for e in suite.entries}
+    result = SuiteResult(True, suite=None if suite.folder is None else str(suite.folder))
     result.ignored = sorted(p.name for p in images.iterdir()
                             if p.suffix.lower() in IMAGE_EXTENSIONS and p.stem not in known)
-    for i, (name, scene, ref_path) in enumerate(scenes, 1):
+    for i, (e, scene) in enumerate(scenes, 1):
+        name = e.name
         path, why = find_image(images, name)
         if path is None:
             g = Graded(name, None, False, "missing" if why == "no image" else "error", why)
@@ -373,14 +666,12 @@ def grade(images: Path, suite_dir: Path | None, pattern: str | None = None,
                 if user.size != (w, h):
                     raise UserError(f"{path.name} is {user.size[0]}x{user.size[1]}, the scene's "
                                     f"film is {w}x{h}")
-                ref = None if ref_path is None else read_reference(ref_path, "stored reference")
-                if ref is not None and ref.image.shape != user.image.shape:
-                    raise UserError(f"the stored reference {ref_path.name} is not {w}x{h}")
+                ref = None if e.reference_exr is None else _stored_reference(e, scene)
                 run = check_image(user, scene, spp, thresholds, reference=ref)
                 g = Graded(name, path.name, run.passed, "pass" if run.passed else "FAIL",
-                           "", run, scene, user)
-            except UserError as e:
-                g = Graded(name, path.name, False, "error", str(e))
+                           "", run, scene, user, ref)
+            except UserError as err:
+                g = Graded(name, path.name, False, "error", str(err))
         result.graded.append(g)
         result.passed &= g.passed
         log(f"[{i}/{len(scenes)}] {name:<22} {g.image or '-':<26} {g.status}"
@@ -388,31 +679,120 @@ def grade(images: Path, suite_dir: Path | None, pattern: str | None = None,
     return result
 
 
-def update_references(result: SuiteResult, suite_dir: Path) -> list[Path]:
-    """Store the graded images as the suite's references; only for a run that passed."""
+#: What ``whitted suite check`` writes into its output folder.
+OUTPUT_NAMES = ("index.html", "suite.json")
+
+
+def write_outputs(result: SuiteResult, outdir: Path) -> list[Path]:
+    """``suite.json`` and ``index.html`` in ``outdir`` (which exists)."""
+    from reference.compare import write_json
+
+    write_json(outdir / "suite.json", result.to_json())
+    (outdir / "index.html").write_text(suite_page(result))
+    return [outdir / n for n in OUTPUT_NAMES]
+
+
+# ---------------------------------------------------------------- --update
+
+
+class PendingFiles:
+    """Files written beside their targets under temporary names, renamed over them together.
+
+    :meth:`path_for` hands out the temporary name to write (in the target's own
+    folder, so the rename cannot cross file systems); :meth:`commit` renames
+    them all; leaving the ``with`` block removes whatever was not renamed.
+    """
+
+    def __init__(self):
+        self.moves: list[tuple[Path, Path]] = []
+
+    def __enter__(self) -> PendingFiles:
+        return self
+
+    def path_for(self, target: Path) -> Path:
+        from tracer.errors import UserError
+        from tracer.imageio import TEMP_PREFIX, file_mode
+
+        try:
+            fd, tmp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=target.suffix,
+                                       dir=target.parent)
+            os.close(fd)
+            self.moves.append((Path(tmp), target))
+            os.chmod(tmp, file_mode())
+        except OSError as e:
+            raise UserError(f"{target}: cannot write: {e.strerror or e}") from None
+        return Path(tmp)
+
+    def commit(self) -> None:
+        from tracer.errors import UserError
+
+        while self.moves:
+            tmp, target = self.moves[0]
+            try:
+                os.replace(tmp, target)
+            except OSError as e:
+                raise UserError(f"{target}: cannot write: {e.strerror or e}") from None
+            self.moves.pop(0)
+
+    def __exit__(self, *exc) -> None:
+        for tmp, _ in self.moves:
+            try:
+                os.unlink(tmp)
+            except OSError:
+                pass
+        self.moves = []
+
+
+def check_update_targets(suite: Suite) -> None:
+    """Refuse, before any rendering, an ``--update`` that could not write all its files."""
+    from tracer.errors import UserError
+    from tracer.imageio import check_output_path
+
+    if suite.folder is None:
+        raise UserError("--update rewrites a suite's stored references: give --suite DIR")
+    for e in suite.entries:
+        check_output_path(e.reference_exr, (".exr",), "file type")
+        check_output_path(e.reference_png, (".png",), "file type")
+    check_output_path(suite.folder / "manifest.json", (".json",), "file type")
+    check_output_path(suite.folder / "README.md", (".md",), "file type")
+
+
+def stage_references(result: SuiteResult, suite: Suite, pending: PendingFiles) -> list[Path]:
+    """Write the graded images as the suite's references into ``pending``; only for a pass.
+
+    The references' ``spread`` and ``quadrature`` layers are kept (module
+    docstring). Returns the reference EXRs that :meth:`PendingFiles.commit`
+    will replace.
+    """
     from reference.compare import write_json
     from tracer.errors import UserError
     from tracer.imageio import write_png
 
     if not result.passed:
         raise ValueError("refusing to update the references of a run that fails")
-    mf = suite_dir / "manifest.json"
-    manifest = json.loads(mf.read_text())
-    by_name = {e["name"]: e for e in manifest["scenes"]}
+    by_name = {e.name: e for e in suite.entries}
     written = []
     for g in result.graded:
         e = by_name[g.name]
-        old = read_reference(suite_dir / e["files"]["reference_exr"], "stored reference")
-        exr = suite_dir / e["files"]["reference_exr"]
-        if g.user is None:
+        if g.user is None or g.reference is None:
             raise UserError(f"{g.name}: no image to store")
-        write_reference(exr, g.user.image, g.user.variance, old.spread, old.quadrature)
-        write_png(suite_dir / e["files"]["reference_png"], g.user.image)
-        e["reference"] = {"source": f"golden image {g.image}", "updated": _now(),
-                          "storage": g.user.storage}
-        written.append(exr)
-    write_json(mf, manifest)
-    (suite_dir / "README.md").write_text(manifest_markdown(manifest))
+        write_reference(pending.path_for(e.reference_exr), g.user.image, g.user.variance,
+                        g.reference.spread, g.reference.quadrature)
+        write_png(pending.path_for(e.reference_png), g.user.image)
+        suite.manifest["scenes"][e.index]["reference"] = {
+            "source": f"golden image {g.image}", "updated": _now(), "storage": g.user.storage}
+        written.append(e.reference_exr)
+    write_json(pending.path_for(suite.folder / "manifest.json"), suite.manifest)
+    pending.path_for(suite.folder / "README.md").write_text(manifest_markdown(suite.manifest))
+    return written
+
+
+def update_references(result: SuiteResult, suite: Suite) -> list[Path]:
+    """Store the graded images as the suite's references, all or none; only for a pass."""
+    check_update_targets(suite)
+    with PendingFiles() as pending:
+        written = stage_references(result, suite, pending)
+        pending.commit()
     return written
 
 
