@@ -186,10 +186,11 @@ def test_named_files_are_resolved_and_must_be_regular(tmp_path, capsys):
     path = scene(tmp_path / "scene", EXTRA='<shape type="obj">'
                  '<string name="filename" value="mesh.obj"/></shape>')
     with deadline(30):
-        refused(capsys, ["render", path, "-o", tmp_path / "s.exr"], "mesh file", "FIFO")
+        refused(capsys, ["render", path, "-o", tmp_path / "s.exr"], ":11: <shape", "mesh file",
+                "FIFO")
     (tmp_path / "scene" / "mesh.obj").unlink()
     (tmp_path / "scene" / "mesh.obj").symlink_to(tmp_path)
-    refused(capsys, ["render", path, "-o", tmp_path / "s.exr"], "is a folder")
+    refused(capsys, ["render", path, "-o", tmp_path / "s.exr"], ":11: <shape", "is a folder")
     # outside the scene's folder: allowed, as Mitsuba allows it
     (tmp_path / "light.xml").write_text('<scene version="3.0.0"><emitter type="point">'
                                         '<point name="position" value="1, 1, 3"/>'
