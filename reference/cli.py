@@ -383,7 +383,13 @@ def cmd_compare(args) -> int:
     print(format_comparison(result))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in result.files.values()))
     if args.renderer == "all":
-        return _compare_luxcore(args, scene, result)
+        try:
+            return _compare_luxcore(args, scene, result)
+        except UserError as e:   # LuxCore failed or ran past its limits: the vote is optional
+            from tracer.errors import one_line
+
+            print(f"note: LuxCore (the third renderer's vote): not available: "
+                  f"{one_line(str(e), 300)}", file=sys.stderr, flush=True)
     return EXIT_OK if result.passed else EXIT_FAIL
 
 
@@ -532,24 +538,14 @@ def cmd_report(args) -> int:
 
 
 def _report_luxcore(args) -> bool:
-    """Whether the report adds LuxCore's three-way verdicts (a one-line note when it cannot).
+    """Whether the report adds LuxCore's three-way verdicts: unless ``--no-luxcore``.
 
-    On by default where pyluxcore is installed; ``--no-luxcore`` turns it off. With
-    WHITTED_REQUIRE_LUXCORE=1 (CI) a missing pyluxcore is an error.
+    LuxCore is optional: where it is missing, fails or runs past its time limits the
+    report goes on without it and says so ("not available", reference.report), its
+    exit status the tracer's against Mitsuba. WHITTED_REQUIRE_LUXCORE=1 (CI) makes
+    LuxCore's tests fail without it (tests/test_luxcore.py), not the report.
     """
-    import os
-
-    from reference import luxcore
-    from tracer.errors import UserError
-
-    if args.no_luxcore:
-        return False
-    if luxcore.available():
-        return True
-    if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
-        raise UserError(luxcore.INSTALL_HINT + " (WHITTED_REQUIRE_LUXCORE=1)")
-    print(f"note: no LuxCore column: {luxcore.INSTALL_HINT}", flush=True)
-    return False
+    return not args.no_luxcore
 
 
 def cmd_mutants(args) -> int:

@@ -27,13 +27,26 @@ How it renders (:mod:`reference.luxcore_scene` for the scene):
   included); and the spread of the passes' means / passes, unbiased, for the
   region sums.
 
-LuxCore runs in ``python -m reference.luxcore_runner`` under a time limit,
-one child for a list of scenes (:func:`render_many`), so its allocator and
-threads never share a process with Dr.Jit.
+LuxCore runs in ``python -m reference.luxcore_runner`` under time limits that
+follow its work (:func:`pass_cpu_limit`, :func:`wait_limit`), one child for a
+list of scenes (:func:`render_many`), so its allocator and threads never share
+a process with Dr.Jit.
+
+Time limits. The child of ``whitted report`` renders at the lowest priority
+(``nice`` 19) beside the report's own work, so on a busy machine it may get
+almost no CPU for minutes: its wall-clock time says nothing about whether it
+is stuck. So a pass is limited by the CPU time the child spends on it
+(:func:`pass_cpu_limit`: 60 s, or 20 microseconds per film sample where that
+is more; a pass takes about 1-2 microseconds a sample here), and the caller
+waits, once it has nothing else to do, at most WHITTED_LUXCORE_TIMEOUT seconds,
+by default 60 s plus 60 s per pass still to render (:func:`wait_limit`). A
+report that meets either limit goes on without LuxCore's vote
+(reference.report).
 """
 
 from __future__ import annotations
 
+import math
 import os
 import shutil
 import subprocess
@@ -60,9 +73,45 @@ PASSES = 4
 SUBSAMPLES = 16
 #: Samples per film pixel per pass.
 SPP_PER_PASS = 1
-#: Seconds a child may run per pass, on top of a fixed start-up allowance.
+#: Seconds of wall-clock time the caller waits per pass still to render, once it waits
+#: (:func:`wait_limit`), on top of a start-up allowance.
 PASS_TIMEOUT = 60.0
 STARTUP_TIMEOUT = 60.0
+#: The wait's limit in seconds, where set (:func:`wait_limit`).
+TIMEOUT_VARIABLE = "WHITTED_LUXCORE_TIMEOUT"
+#: CPU seconds of the child a pass may take (:func:`pass_cpu_limit`): at least this ...
+PASS_CPU_FLOOR = 60.0
+#: ... or this per film sample of the pass, where that is more (measured: 0.6-1.5 s of CPU
+#: time for a pass of 1024 x 768 film pixels, 0.8-2 microseconds a sample).
+PASS_CPU_PER_SAMPLE = 20e-6
+
+
+def pass_cpu_limit(film_size: tuple[int, int], spp_per_pass: int = SPP_PER_PASS) -> float:
+    """CPU seconds (the child's, all its threads) that one pass of a film may take.
+
+    CPU time, not wall-clock time: the work done, whatever else the machine runs (the
+    report's child runs at the lowest priority). 10 to 25 times a pass's measured cost,
+    and never below PASS_CPU_FLOOR.
+    """
+    samples = film_size[0] * film_size[1] * spp_per_pass
+    return max(PASS_CPU_FLOOR, PASS_CPU_PER_SAMPLE * samples)
+
+
+def wait_limit(passes_left: int) -> float:
+    """Seconds the caller waits for the child once it waits, with ``passes_left`` passes
+    still to render: WHITTED_LUXCORE_TIMEOUT if set (a positive number of seconds), else
+    STARTUP_TIMEOUT plus PASS_TIMEOUT per pass left. A bad value is a one-line UserError."""
+    text = os.environ.get(TIMEOUT_VARIABLE, "").strip()
+    if not text:
+        return STARTUP_TIMEOUT + PASS_TIMEOUT * passes_left
+    try:
+        v = float(text)
+    except ValueError:
+        v = math.nan
+    if not v > 0 or math.isinf(v):
+        raise UserError(f"{TIMEOUT_VARIABLE}={text[:40]!r}: expected a positive number of "
+                        "seconds")
+    return v
 
 
 def available() -> bool:
@@ -90,7 +139,7 @@ class LuxResult:
 
 
 def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: int,
-               pass_timeout: float) -> None:
+               pass_cpu: float) -> None:
     """The job file of one scene, and its meshes as binary PLY files beside it.
 
     LuxCore reads each mesh itself (``scene.shapes.NAME.ply``): a tessellated sphere of
@@ -109,7 +158,7 @@ def _write_job(path: Path, desc: Description, seeds: list[int], spp_per_pass: in
                   'renderengine.seed = 1\n', "renderengine.seed = @SEED@\n")),
               "film": np.array(desc.film_size), "seeds": np.array(seeds, dtype=np.int64),
               "subsamples": np.array(desc.subsamples),
-              "pass_timeout": np.array(pass_timeout)}
+              "pass_cpu": np.array(pass_cpu)}
     np.savez(path, **arrays)
 
 
@@ -120,8 +169,8 @@ def render_many(scenes: list, passes: int = PASSES, seed: int = 0,
 
     ``progress(done, total)`` is called per pass. One-line UserError when
     pyluxcore is missing, a scene does not convert, or the child fails or
-    runs past its time limit (``timeout``, default: start-up plus
-    PASS_TIMEOUT per pass).
+    runs past a time limit: a pass's CPU time (:func:`pass_cpu_limit`), or the
+    wait (``timeout`` seconds, default :func:`wait_limit`).
     """
     return start_many(scenes, passes, seed, spp_per_pass, timeout,
                       subsamples).results(progress)
@@ -139,22 +188,26 @@ def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
     seeds = [seed * 1000 + k for k in range(passes)]
     total = passes * len(scenes)
     if timeout is None:
-        timeout = STARTUP_TIMEOUT + PASS_TIMEOUT * total
+        wait_limit(total)   # a bad WHITTED_LUXCORE_TIMEOUT refused before the child starts
     tmp = Path(tempfile.mkdtemp(prefix="whitted-luxcore-"))
     try:
         jobs = []
         for i, d in enumerate(descs):
             job = tmp / f"job{i}.npz"
-            _write_job(job, d, seeds, spp_per_pass, PASS_TIMEOUT)
+            _write_job(job, d, seeds, spp_per_pass, pass_cpu_limit(d.film_size, spp_per_pass))
             jobs.append(job)
         # the child's messages go to a file, not a pipe, which nobody reads while the
-        # caller works and which would stop the child when full
-        log = open(tmp / "child.log", "w+")
-        proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
-                                 *(["--nice", str(nice)] if nice else []),
-                                 *map(str, jobs)], stdout=subprocess.DEVNULL,
-                                stderr=log, text=True, env=dict(os.environ),
-                                cwd=str(Path(__file__).resolve().parent.parent))
+        # caller works and which would stop the child when full. The child appends through
+        # a handle of its own and the caller reads through another: one shared handle
+        # shares its offset, and the caller's seek put the child's last lines (why it
+        # failed) over the first ones.
+        with open(tmp / "child.log", "a") as child_log:
+            proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
+                                     *(["--nice", str(nice)] if nice else []),
+                                     *map(str, jobs)], stdout=subprocess.DEVNULL,
+                                    stderr=child_log, text=True, env=dict(os.environ),
+                                    cwd=str(Path(__file__).resolve().parent.parent))
+        log = open(tmp / "child.log")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -170,7 +223,8 @@ class LuxJob:
     descs: list
     jobs: list
     total: int
-    timeout: float
+    #: seconds the caller waits once it waits (:meth:`results`); None: :func:`wait_limit`
+    timeout: float | None
     spp_per_pass: int
     start: float = field(default_factory=time.perf_counter)
 
@@ -178,10 +232,12 @@ class LuxJob:
         """Wait for the child; its images in the scenes' order (see :func:`render_many`).
 
         ``seconds`` of a result is the child's time since its start over the scenes,
-        whatever else the machine did meanwhile."""
+        whatever else the machine did meanwhile. The wait is limited from this call on
+        (before it the caller's own work legitimately takes the cores), to ``timeout``
+        or :func:`wait_limit` of the passes not yet done."""
         try:
             done, tail, part = 0, [], ""
-            self.log.seek(0)
+            waited, limit = time.perf_counter(), None
             while True:
                 exited = self.proc.poll() is not None
                 part += self.log.read()
@@ -195,8 +251,17 @@ class LuxJob:
                         tail = (tail + [line.strip()])[-5:]
                 if exited:
                     break
-                if time.perf_counter() - self.start > self.timeout:
-                    raise UserError(f"LuxCore ran past its time limit of {self.timeout:.0f} s")
+                if limit is None:   # the passes already done are known after the first read
+                    limit = (self.timeout if self.timeout is not None
+                             else wait_limit(self.total - done))
+                if time.perf_counter() - waited > limit:
+                    how = ("" if self.timeout is not None
+                           or os.environ.get(TIMEOUT_VARIABLE, "").strip() else
+                           f": {STARTUP_TIMEOUT:.0f} s + {PASS_TIMEOUT:.0f} s a pass left")
+                    raise UserError(
+                        f"LuxCore ran past its time limit of {limit:g} s of waiting{how} "
+                        f"({done} of {self.total} passes done; set {TIMEOUT_VARIABLE} "
+                        "to wait longer)")
                 time.sleep(0.02)
             seconds = time.perf_counter() - self.start
             if self.proc.returncode != 0:

@@ -58,13 +58,16 @@ class Report:
     #: Mitsuba scenes imported and compared with Mitsuba's render of the original
     #: (reference.importer.validate_case dicts)
     imported: list = field(default_factory=list)
+    #: optional parts that did not run, and why ({"luxcore": "LuxCore is not installed: ..."})
+    not_available: dict = field(default_factory=dict)
 
     def to_json(self) -> dict:
         return {"pass": self.passed, "quick": self.quick, "date": self.date,
                 "versions": self.versions, "machine": self.machine,
                 "seconds": self.seconds, "scenes": self.scenes,
                 "fresnel_pass": self.fresnel_passed, "fresnel": self.fresnel,
-                "mutants": self.mutants, "imported": self.imported}
+                "mutants": self.mutants, "imported": self.imported,
+                "not_available": self.not_available}
 
 
 def versions() -> dict:
@@ -154,7 +157,10 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     It does not change whether the report passes: that stays the tracer's verdict
     against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
     tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
-    LuxCore, shown in the report, not a failure of the tracer.
+    LuxCore, shown in the report, not a failure of the tracer. Nor does LuxCore being
+    missing, failing or past its time limits (reference.luxcore): the report then
+    goes on without the vote, and says why in one line on stderr and as "not
+    available" in its three files (:func:`not_available`).
     """
     from reference.shared import shared
 
@@ -178,13 +184,20 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
     total = len(scenes) + (1 if fresnel else 0)
     started = None
     if luxcore:
+        from reference import luxcore as lux
         from reference.luxcore_compare import compare_three, start_three
 
         t_lux = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
-        started = start_three(sized, quick=quick, nice=LUXCORE_NICE)
-        log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while the "
-            "report goes on")
+        try:
+            lux.require()
+            started = start_three(sized, quick=quick, nice=LUXCORE_NICE)
+        except Exception as e:   # an optional part: the report goes on without it
+            not_available(report, "luxcore", e)
+            luxcore = False
+        else:
+            log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while "
+                "the report goes on")
     try:
         from reference.luxcore import SharedCores
 
@@ -197,10 +210,15 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
         if started is not None:
             started.close()
         raise
+    threes = None
     if luxcore:
-        threes = compare_three(sized, quick=quick, started=started,
-                               main=[{"passed": s["pass"], "checks": s["checks"]}
-                                     for s in report.scenes])
+        try:
+            threes = compare_three(sized, quick=quick, started=started,
+                                   main=[{"passed": s["pass"], "checks": s["checks"]}
+                                         for s in report.scenes])
+        except Exception as e:   # slow or failing: the report goes on without the vote
+            not_available(report, "luxcore", e)
+    if threes is not None:
         for entry, t in zip(report.scenes, threes, strict=True):
             entry["luxcore"] = t.to_json()
             log(f"  {t.scene:<20} {t.verdict}" + (f" ({t.detail})" if t.detail else ""))
@@ -226,6 +244,33 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
     (out / "report.md").write_text(markdown(report))
     (out / "index.html").write_text(html_page(report, out))
     return report
+
+
+#: The optional parts' names as the report shows them.
+OPTIONAL_PARTS = {"luxcore": "LuxCore (the third renderer's vote)"}
+
+
+def not_available(report: Report, part: str, error: BaseException) -> None:
+    """Record that an optional part of the report (``part``, a key of OPTIONAL_PARTS)
+    did not run, and say why in one line on stderr. The report's verdict is not touched:
+    it stays the tracer's against Mitsuba."""
+    import sys
+
+    from tracer.errors import UserError, one_line
+
+    why = str(error) if isinstance(error, UserError) else (
+        f"{type(error).__name__}: {error}" if str(error) else type(error).__name__)
+    why = one_line(why, 300)
+    report.not_available[part] = why
+    print(f"note: {OPTIONAL_PARTS.get(part, part)}: not available: {why}; the report goes on "
+          "without it", file=sys.stderr, flush=True)
+
+
+def _not_available_lines(report: Report) -> list[str]:
+    """One sentence per optional part that did not run (the HTML and Markdown)."""
+    return [f"{OPTIONAL_PARTS.get(k, k)}: not available: {why}. The report's result is the "
+            "tracer's against Mitsuba, as without it."
+            for k, why in report.not_available.items()]
 
 
 def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
@@ -383,6 +428,7 @@ def markdown(report: Report) -> str:
              f"{v.get('backend')}, whitted {v.get('whitted')}, mitsuba {v.get('mitsuba')}, "
              f"drjit {v.get('drjit')}, {report.machine.get('cpu')} ({report.machine.get('cores')}"
              f" cores), {report.seconds:.0f} s", "",
+             *(line for s in _not_available_lines(report) for line in (s, "")),
              "| scene | size, spp, depth | reference | test | checks | median rel. | "
              "99.9th pct. rel. | FLIP | tracer s | Mitsuba s | Mitsuba/tracer | result |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
@@ -573,6 +619,8 @@ def html_page(report: Report, outdir: Path) -> str:
         f"<h1>whitted accuracy report: {_verdict(report.passed)}</h1>",
         f"<p class='meta'>{esc(report.date)} &middot; {'quick' if report.quick else 'full'} run "
         f"&middot; {report.seconds:.0f} s &middot; <span id='img-status'></span></p>",
+        *(f"<p class='expected not-available'>{esc(s)}</p>"
+          for s in _not_available_lines(report)),
         "<p>Each scene is rendered by whitted's Dr.Jit tracer and by Mitsuba 3 at the same "
         "strata. The <b>deterministic</b> reference evaluates the whole Whitted ray tree with "
         "Mitsuba's plugins: both lobes of every mirror and glass, each with the weight "

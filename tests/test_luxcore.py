@@ -203,7 +203,7 @@ def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
 
 def test_child_past_its_time_limit_is_one_line(luxcore):
     scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(8, 6))
-    with pytest.raises(UserError, match="time limit of 0 s"):
+    with pytest.raises(UserError, match="time limit of 0.1 s"):
         luxcore.render_many([scene], passes=1, timeout=0.1)
 
 
