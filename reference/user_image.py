@@ -49,23 +49,15 @@ its own (half a step). The cells:
 
 from __future__ import annotations
 
-import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from tracer.errors import UserError
+from tracer.imageheader import FORMAT_NAMES
 
 ENCODINGS = ("srgb", "linear", "minray")
-
-#: Formats by their first bytes (the magic numbers of their specifications).
-_MAGIC = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"PF", "pfm"), (b"Pf", "pfm"),
-          (b"#?RADIANCE", "hdr"), (b"#?RGBE", "hdr"), (b"P3", "ppm"), (b"P6", "ppm"),
-          (b"\x1f\x8b", "gz"))
-
-FORMAT_NAMES = {"exr": "OpenEXR", "png": "PNG", "pfm": "PFM", "hdr": "Radiance HDR",
-                "ppm": "PPM"}
 EIGHT_BIT = ("png", "ppm")
 
 
@@ -96,14 +88,6 @@ class UserImage:
     @property
     def size(self) -> tuple[int, int]:
         return self.image.shape[1], self.image.shape[0]
-
-
-def sniff(head: bytes) -> str | None:
-    """The format of a file from its first bytes, or None."""
-    for magic, name in _MAGIC:
-        if head.startswith(magic):
-            return name
-    return None
 
 
 def srgb_decode(e: np.ndarray) -> np.ndarray:
@@ -151,22 +135,14 @@ def read_user_image(path: str | Path, encoding: str | None = None) -> UserImage:
     (PNG, PPM) encodes light; default ``srgb``. It is refused for formats that
     store linear floating-point values.
     """
+    from tracer.imageheader import check_image_file, library_message
+
     p = Path(path)
     if encoding is not None and encoding not in ENCODINGS:
         raise UserError(f"--encoding: expected one of {', '.join(ENCODINGS)}, got {encoding!r}")
-    try:
-        if p.is_dir():
-            raise UserError(f"{path}: is a folder, expected an image file")
-        with open(p, "rb") as f:
-            head = f.read(16)
-    except OSError as e:
-        raise UserError(f"{path}: cannot read: {e.strerror or e}") from None
-    fmt = sniff(head)
-    if fmt == "gz" and str(p).endswith((".ppm.gz", ".pnm.gz")):
-        fmt = "ppm"
-    if fmt is None or fmt == "gz":
-        raise UserError(f"{path}: not an image (its first bytes are no OpenEXR, PFM, Radiance "
-                        "HDR, PNG or PPM P3/P6 header)")
+    # A regular file, a known header, a size whose reading fits WHITTED_MAX_MEMORY; the
+    # format is told from the first bytes (a .ppm.gz by those of its decompressed data).
+    fmt = check_image_file(p).format
     if encoding is not None and fmt not in EIGHT_BIT:
         raise UserError(f"{path}: --encoding {encoding} applies to 8-bit PNG and PPM files; "
                         f"a {FORMAT_NAMES[fmt]} file stores linear values")
@@ -179,11 +155,8 @@ def read_user_image(path: str | Path, encoding: str | None = None) -> UserImage:
     except OSError as e:
         raise UserError(f"{path}: cannot read: {e.strerror or e}") from None
     except (RuntimeError, ValueError, KeyError, TypeError, EOFError) as e:
-        from tracer.errors import one_line
-
-        why = re.sub(r"^\[[^\]]*\]\s*", "", str(e).strip())  # Mitsuba's "[file.cpp:123] "
         raise UserError(f"{path}: unreadable {FORMAT_NAMES[fmt]} file "
-                        f"({one_line(why, 160) or type(e).__name__})") from None
+                        f"({library_message([], e)})") from None
     if img.image.ndim != 3 or img.image.shape[0] < 1 or img.image.shape[1] < 1:
         raise UserError(f"{path}: an empty image")
     return img
@@ -244,32 +217,43 @@ def _read_exr(p: Path, fmt: str, encoding: str) -> UserImage:
                      notes=notes)
 
 
-def _bitmap_array(p: Path):
+def _bitmap_array(p: Path, fmt: str):
     """Mitsuba's Bitmap of a file and its array.
 
     Read from the file itself: Mitsuba's file stream refuses a file that ends
     early, where its memory stream reads on past the end. A name that is not
-    UTF-8 (which Mitsuba cannot open) is read through a temporary copy.
+    UTF-8 (which Mitsuba cannot open) is read through a temporary copy. What
+    libpng or Mitsuba print on stderr while reading is kept from the terminal;
+    a failure is one line.
     """
     import shutil
     import tempfile
 
     from reference import mitsuba
+    from tracer.imageheader import ImageError, captured_stderr, library_message
 
     mi = mitsuba()
-    try:
-        str(p).encode("utf-8")
-        return np.array(mi.Bitmap(str(p)))
-    except UnicodeEncodeError:
-        with tempfile.TemporaryDirectory() as tmp:
-            copy = Path(tmp) / ("image" + "".join(c for c in p.suffix if c.isalnum() or c == "."))
-            shutil.copyfile(p, copy)
-            return np.array(mi.Bitmap(str(copy)))
+    error = None
+    with captured_stderr() as said:
+        try:
+            try:
+                str(p).encode("utf-8")
+                return np.array(mi.Bitmap(str(p)))
+            except UnicodeEncodeError:
+                with tempfile.TemporaryDirectory() as tmp:
+                    copy = Path(tmp) / ("image" + "".join(c for c in p.suffix
+                                                          if c.isalnum() or c == "."))
+                    shutil.copyfile(p, copy)
+                    return np.array(mi.Bitmap(str(copy)))
+        except (RuntimeError, ValueError, TypeError, EOFError) as e:
+            error = e
+    raise ImageError(p, f"unreadable {FORMAT_NAMES[fmt]} file "
+                        f"({library_message(said, error)})")
 
 
 def _read_bitmap(p: Path, fmt: str, encoding: str) -> UserImage:
     """PFM (float32) and Radiance RGBE through Mitsuba's Bitmap."""
-    a = _bitmap_array(p)
+    a = _bitmap_array(p, fmt)
     notes: list[str] = []
     image = _rgb(a.astype(np.float64), notes, "image")
     if fmt == "pfm":
@@ -303,7 +287,7 @@ def _integer_image(p: Path, fmt: str, codes: np.ndarray, maxval: int, encoding: 
 
 
 def _read_png(p: Path, fmt: str, encoding: str) -> UserImage:
-    a = _bitmap_array(p)
+    a = _bitmap_array(p, fmt)
     notes: list[str] = []
     codes = _rgb(a, notes, "image")
     maxval = 65535 if codes.dtype == np.uint16 else 255

@@ -240,7 +240,12 @@ def write_exr(path: str | Path, image: np.ndarray,
 
 def read_exr(path: str | Path) -> np.ndarray:
     """The R, G, B channels of an OpenEXR file as float32 (H x W x 3)."""
+    from tracer.imageheader import ImageError
+
     channels, _ = read_exr_channels(path)
+    if not {"R", "G", "B"} <= set(channels):
+        shown = ", ".join(sorted(channels)[:8])
+        raise ImageError(path, f"no R, G, B channels in this OpenEXR file (found: {shown})")
     return np.stack([np.asarray(channels[c], dtype=np.float32) for c in "RGB"], axis=-1)
 
 
@@ -251,14 +256,74 @@ def read_exr_channels(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
     ``variance.R``); each array is H x W in the file's own type (float16 for
     HALF, float32 for FLOAT, uint32 for UINT), so that a caller can tell the
     precision a value was stored with. Read through memory: OpenEXR takes only
-    file names it can encode as UTF-8.
+    file names it can encode as UTF-8. The file is checked first
+    (:func:`tracer.imageheader.check_image_file`: a regular file, an OpenEXR
+    header, a size within WHITTED_MAX_MEMORY), and what the library prints on
+    stderr while it reads is kept from the terminal: a failure is one
+    :class:`~tracer.imageheader.ImageError` line.
     """
     import OpenEXR
 
-    with OpenEXR.File(io.BytesIO(Path(path).read_bytes()), separate_channels=True) as f:
-        channels = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
-        header = dict(f.header())
+    from tracer.imageheader import (
+        ImageError,
+        captured_stderr,
+        check_image_file,
+        library_message,
+        read_file,
+    )
+
+    data = read_file(path, check_image_file(path, ("exr",)))
+    error = None
+    with captured_stderr() as said:
+        try:
+            with OpenEXR.File(io.BytesIO(data), separate_channels=True) as f:
+                channels = {name: np.asarray(ch.pixels) for name, ch in f.channels().items()}
+                header = dict(f.header())
+        except (RuntimeError, ValueError, TypeError, KeyError, IndexError, OSError,
+                EOFError) as e:
+            error = e
+    if error is not None:
+        raise ImageError(path, f"unreadable OpenEXR file ({library_message(said, error)})")
     return channels, header
+
+
+#: A PNG texture's reading, per value beyond the decoded one: Pillow's image, its RGB
+#: conversion, float64 codes, the sRGB curve's temporaries, the float32 texels (measured:
+#: 34 bytes a value in all, 2000 x 1500 RGB or grey).
+PNG_TEXTURE_WORK_BYTES_PER_VALUE = 44
+
+
+def read_texture_file(path: str | Path) -> np.ndarray:
+    """A bitmap texture's or environment map's file: an 8-bit PNG as its codes (H x W x 3
+    uint8, grey, palette and alpha reduced to RGB), an OpenEXR file as its linear R, G, B
+    (float32). The format must agree with the suffix (``.png``, ``.exr``); the file is
+    checked before it is decoded (:func:`tracer.imageheader.check_image_file`).
+    Errors are one :class:`~tracer.imageheader.ImageError` line.
+    """
+    from tracer.imageheader import ImageError, check_image_file, read_file
+
+    suffix = Path(path).suffix.lower()
+    if suffix == ".exr":
+        return np.ascontiguousarray(read_exr(path), dtype=np.float32)
+    if suffix != ".png":
+        raise ImageError(path, "expected a .png or .exr image")
+    from PIL import Image
+
+    data = read_file(path, check_image_file(path, ("png",), PNG_TEXTURE_WORK_BYTES_PER_VALUE))
+    # The size was checked against WHITTED_MAX_MEMORY above: Pillow's own limit on
+    # pixels (a warning, then an exception, at 89 and 179 million) would only differ.
+    bomb_limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
+    try:
+        with Image.open(io.BytesIO(data), formats=["PNG"]) as im:
+            if im.mode not in ("L", "LA", "RGB", "RGBA", "P"):
+                raise ImageError(path, f"an 8-bit PNG is expected, got mode {im.mode}")
+            return np.asarray(im.convert("RGB"), dtype=np.uint8)
+    except (OSError, ValueError, SyntaxError, EOFError) as e:
+        from tracer.errors import one_line
+
+        raise ImageError(path, f"unreadable PNG file ({one_line(str(e), 160)})") from None
+    finally:
+        Image.MAX_IMAGE_PIXELS = bomb_limit
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:
@@ -324,26 +389,28 @@ def read_ppm_maxval(path: str | Path) -> tuple[np.ndarray, int]:
     significant first) otherwise; P3 stores decimal numbers, which may exceed
     the maxval (minray's colours above 1).
     """
-    import gzip
+    from tracer.imageheader import (
+        ImageError,
+        check_image_file,
+        gunzip_bounded,
+        ppm_fields,
+        read_file,
+    )
+    from tracer.limits import PPM_TEXT_BYTES_PER_BYTE, check_memory
 
-    raw = Path(path).read_bytes()
-    if str(path).endswith(".gz"):
-        raw = gzip.decompress(raw)
-    fields: list[bytes] = []
-    pos = 0
-    while len(fields) < 4:  # magic, width, height, maxval
-        while pos < len(raw) and raw[pos:pos + 1].isspace():
-            pos += 1
-        if raw[pos:pos + 1] == b"#":
-            pos = raw.index(b"\n", pos) + 1 if b"\n" in raw[pos:] else len(raw)
-            continue
-        end = pos
-        while end < len(raw) and not raw[end:end + 1].isspace() and raw[end:end + 1] != b"#":
-            end += 1
-        if end == pos:
-            raise UserError(f"{path}: not a PPM file (header ends early)")
-        fields.append(raw[pos:end])
-        pos = end
+    header = check_image_file(path, ("ppm",))
+    raw = read_file(path, header)
+    if header.gzip:
+        raw = gunzip_bounded(path, raw, PPM_TEXT_BYTES_PER_BYTE)
+    fields, pos = ppm_fields(raw)
+    if len(fields) < 4:
+        raise UserError(f"{path}: not a PPM file (header ends early)")
+    if fields[0] == b"P3":
+        try:  # text: every number a Python object on the way (see PPM_TEXT_BYTES_PER_BYTE)
+            check_memory(len(raw) * PPM_TEXT_BYTES_PER_BYTE,
+                         f"reading this {len(raw):,}-byte plain PPM text")
+        except UserError as e:
+            raise ImageError(path, str(e)) from None
     magic = fields[0]
     try:
         w, h, maxval = (int(x) for x in fields[1:])

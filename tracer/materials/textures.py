@@ -10,6 +10,7 @@ no kind has its own copy of a texture lookup.
 from __future__ import annotations
 
 import math
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -78,27 +79,21 @@ def srgb_decode(v: np.ndarray) -> np.ndarray:
 
 
 def load_bitmap(t: _Table, key: str, path: Path, raw: bool) -> np.ndarray:
-    """The texels of an image file (PNG or OpenEXR) as linear float32 RGB; one-line errors."""
-    suffix = path.suffix.lower()
-    if not path.is_file():
+    """The texels of an image file (PNG or OpenEXR) as linear float32 RGB; one-line errors
+    (the file is checked before it is decoded: :func:`tracer.imageio.read_texture_file`)."""
+    from tracer.imageheader import ImageError
+    from tracer.imageio import read_texture_file
+
+    if not os.path.exists(path):  # False, not an error, for a name too long
         t.fail(key, f"no such image file: {path}")
     try:
-        if suffix == ".exr":
-            from tracer.imageio import read_exr
-
-            return np.ascontiguousarray(read_exr(path), dtype=np.float32)
-        if suffix == ".png":
-            from PIL import Image
-
-            with Image.open(path) as im:
-                if im.mode not in ("L", "LA", "RGB", "RGBA", "P"):
-                    t.fail(key, f"{path.name}: an 8-bit PNG is expected, got mode {im.mode}")
-                rgb = np.asarray(im.convert("RGB"), dtype=np.float64) / 255.0
-            return (rgb if raw else srgb_decode(rgb)).astype(np.float32)
-    except (OSError, ValueError, KeyError) as e:
-        t.fail(key, f"cannot read {path.name}: {e}")
-    t.fail(key, f"{path.name}: expected a .png or .exr image")
-    raise AssertionError  # unreachable: fail raises
+        data = read_texture_file(path)
+    except ImageError as e:
+        t.fail(key, f"cannot read {path.name}: {e.reason}")
+    if data.dtype != np.uint8:
+        return data
+    rgb = data / 255.0
+    return (rgb if raw else srgb_decode(rgb)).astype(np.float32)
 
 
 def _parse_bitmap(bm: _Table, hi: float | None) -> Bitmap:
