@@ -19,7 +19,7 @@ $(STAMP): pyproject.toml
 	@# byte-code for the project's own modules, which an editable install leaves out: a
 	@# `whitted` process then starts without compiling them (read even where
 	@# PYTHONDONTWRITEBYTECODE keeps Python from writing them itself)
-	$(BIN)/python -m compileall -q tracer reference >/dev/null
+	$(BIN)/python -m compileall -q tracer reference scenes >/dev/null
 	@touch $(STAMP)
 
 ## browser: Debian's chromium for the report's browser test, where it is missing

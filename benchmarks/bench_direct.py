@@ -18,7 +18,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 
 def _time(fn, repeat: int) -> list[float]:
@@ -32,7 +32,7 @@ def _time(fn, repeat: int) -> list[float]:
 
 
 def main(argv=None) -> int:
-    from reference.cli import _size, resolve_scene
+    from whitted.reference.cli import _size, resolve_scene
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scene", nargs="?", default="three_lights")
@@ -42,8 +42,8 @@ def main(argv=None) -> int:
     p.add_argument("--backend", default=None)
     args = p.parse_args(argv)
 
-    from tracer import backend, load_scene
-    from tracer.integrator import Integrator
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.integrator import Integrator
 
     name = backend.use(args.backend)
     scene = load_scene(resolve_scene(args.scene)).with_overrides(spp=args.spp, size=args.size)
@@ -53,8 +53,8 @@ def main(argv=None) -> int:
 
     import drjit as dr
 
-    from reference import mitsuba
-    from reference.mitsuba_scene import load
+    from whitted.reference import mitsuba
+    from whitted.reference.mitsuba_scene import load
 
     mi = mitsuba()
     integ = Integrator(scene)

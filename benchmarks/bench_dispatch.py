@@ -25,7 +25,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 SCENES = ("three_lights", "sphere_point", "phong_lobes", "shapes_zoo", "whitted_mix",
           "heckbert_physical_hd", "whitted_1980", "mesh_knot", "area_lights")
@@ -37,9 +37,9 @@ def switch_dispatch():
     """``SceneMaterials.at`` built on ``dr.switch`` (same interface, same results)."""
     import drjit as dr
 
-    from tracer.backend import jit
-    from tracer.materials import dispatch
-    from tracer.materials.base import ShadingPoint
+    from whitted.tracer.backend import jit
+    from whitted.tracer.materials import dispatch
+    from whitted.tracer.materials.base import ShadingPoint
 
     def si_of(args):
         return ShadingPoint(*args)
@@ -124,10 +124,10 @@ def main(argv=None) -> int:
 
     import numpy as np
 
-    from reference.cli import resolve_scene
-    from tracer import backend, load_scene
-    from tracer.integrator import Integrator
-    from tracer.materials import dispatch
+    from whitted.reference.cli import resolve_scene
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.integrator import Integrator
+    from whitted.tracer.materials import dispatch
 
     name = backend.use(args.backend)
     variants = {"masks": dispatch.SceneMaterials.at, "switch": switch_dispatch()}

@@ -23,7 +23,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 
 def instances_scene_text(n: int, width: int = 64, height: int = 48, spp: int = 4) -> str:
@@ -61,8 +61,8 @@ def main() -> None:
     args = ap.parse_args()
     w, h = (int(v) for v in args.size.lower().split("x"))
 
-    from tracer.integrator import Integrator
-    from tracer.scene import parse_scene
+    from whitted.tracer.integrator import Integrator
+    from whitted.tracer.scene import parse_scene
 
     try:
         import tomllib
@@ -85,8 +85,8 @@ def main() -> None:
             times.append(time.perf_counter() - s)
         m = "-"
         if not args.no_mitsuba:
-            from reference import mitsuba
-            from reference.mitsuba_scene import load
+            from whitted.reference import mitsuba
+            from whitted.reference.mitsuba_scene import load
 
             mi = mitsuba()
             s = time.perf_counter()

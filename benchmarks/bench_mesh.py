@@ -24,7 +24,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 SCENE = """
 [film]
@@ -66,7 +66,7 @@ to_world = [ {{ scale = 6 }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }}
 
 
 def main(argv=None) -> int:
-    from reference.cli import _size
+    from whitted.reference.cli import _size
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--segments", type=int, default=1200)
@@ -87,11 +87,11 @@ def main(argv=None) -> int:
     import drjit as dr
     from generate import torus_knot, write_obj, write_ply
 
-    from reference import mitsuba
-    from reference.mitsuba_scene import load
-    from tracer import backend, load_scene
-    from tracer.bvh import sah_cost
-    from tracer.integrator import Integrator
+    from whitted.reference import mitsuba
+    from whitted.reference.mitsuba_scene import load
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.bvh import sah_cost
+    from whitted.tracer.integrator import Integrator
 
     name = backend.use(args.backend)
     with tempfile.TemporaryDirectory() as tmp:
@@ -152,7 +152,7 @@ def main(argv=None) -> int:
 
 def _load_times(path: Path, repeat: int) -> tuple[float, float, int]:
     """Median seconds to parse the file (cache cleared first) and to load it again."""
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     cold, warm = [], []
     for _ in range(repeat):

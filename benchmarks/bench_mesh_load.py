@@ -34,7 +34,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 
 def write_files(folder: Path, segments: int, sides: int) -> list[Path]:
@@ -110,7 +110,7 @@ material = "white"
 
 
 def ten_scene_loads(scene: Path, repeat: int, reader=None) -> list[float]:
-    from tracer import load_scene, meshio
+    from whitted.tracer import load_scene, meshio
 
     def ten():
         meshio.clear_cache()
@@ -159,7 +159,7 @@ def main(argv=None) -> int:
     p.add_argument("--old", type=Path, help="another meshio.py to time on the same files")
     args = p.parse_args(argv)
 
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     old = None
     if args.old:

@@ -21,14 +21,14 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 SCENES = ("three_lights", "glass_sphere", "whitted_1980", "tir_prisms", "emitter_in_glass",
           "phong_lobes", "sphere_point")
 
 
 def main(argv=None) -> int:
-    from reference.cli import _positive, _size, resolve_scene
+    from whitted.reference.cli import _positive, _size, resolve_scene
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("scenes", nargs="*", metavar="SCENE", default=list(SCENES))
@@ -40,8 +40,8 @@ def main(argv=None) -> int:
                    help="the recursion schedule (tracer.integrator.SCHEDULES)")
     args = p.parse_args(argv)
 
-    from tracer import backend, load_scene
-    from tracer.integrator import Integrator
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.integrator import Integrator
 
     name = backend.use(args.backend)
     w, h = args.size

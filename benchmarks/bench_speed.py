@@ -44,7 +44,7 @@ BIN = Path(sys.executable).parent
 sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 #: minray's C source (Heckbert 1987, with the fixes it needs to build), kept beside the
 #: checkout in ../shared/minray/ and built at benchmark time; MINRAY_SOURCE for another.
@@ -232,10 +232,10 @@ def _kernel_figures(integ) -> None:
 
 
 def cmd_recursion(args) -> int:
-    from reference.cli import resolve_scene
-    from reference.minray import ray_count
-    from tracer import backend, load_scene
-    from tracer.integrator import Integrator
+    from whitted.reference.cli import resolve_scene
+    from whitted.reference.minray import ray_count
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.integrator import Integrator
 
     name = backend.use(args.backend)
     n, depth = args.size, args.depth
@@ -316,11 +316,11 @@ def cmd_quality(args) -> int:
     import drjit as dr
     import numpy as np
 
-    from reference import mitsuba
-    from reference.cli import resolve_scene
-    from reference.mitsuba_scene import load
-    from tracer import backend, load_scene
-    from tracer.integrator import Integrator
+    from whitted.reference import mitsuba
+    from whitted.reference.cli import resolve_scene
+    from whitted.reference.mitsuba_scene import load
+    from whitted.tracer import backend, load_scene
+    from whitted.tracer.integrator import Integrator
 
     name = backend.use(args.backend)
     mi = mitsuba()
@@ -413,7 +413,7 @@ def _time_report(root: Path, quick: bool) -> tuple[float, int, int]:
     """One full `whitted report` of the checkout at ``root``, run as ``python -m
     reference.cli`` with this environment's Python: (seconds, exit status, peak bytes)."""
     with tempfile.TemporaryDirectory() as tmp:
-        cmd = [sys.executable, "-m", "reference.cli", "report", "-o", tmp]
+        cmd = [sys.executable, "-m", "whitted.reference.cli", "report", "-o", tmp]
         cmd += ["--quick"] if quick else []
         env = dict(os.environ, PYTHONPATH=str(root))
         t0 = time.perf_counter()
@@ -464,7 +464,7 @@ def cmd_report(args) -> int:
 
 
 def main(argv=None) -> int:
-    from reference.cli import _size
+    from whitted.reference.cli import _size
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--backend", default=None, help="Dr.Jit backend for in-process runs")

@@ -42,7 +42,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 #: The user's image's seed where the tracer samples lights (the reference's is 0).
 USER_SEED = 7
@@ -51,12 +51,12 @@ USER_SEED = 7
 def main(argv=None) -> int:
     import numpy as np
 
-    from reference import mutants
-    from reference.check import check_image, tracer_reference
-    from reference.cli import builtin_scenes
-    from reference.suspects import mutated_image, reached_faults
-    from reference.user_image import UserImage
-    from tracer import load_scene
+    from whitted.reference import mutants
+    from whitted.reference.check import check_image, tracer_reference
+    from whitted.reference.suspects import mutated_image, reached_faults
+    from whitted.reference.user_image import UserImage
+    from whitted.scenes import builtin_scenes
+    from whitted.tracer import load_scene
 
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     p.add_argument("--width", type=int, default=mutants.QUICK_WIDTH)

@@ -239,7 +239,7 @@ def precheck(path) -> None:
 
 def mesh(cols: dict, counts, flat) -> dict:
     """The mesh of vertex columns (name -> values) and raw polygons (lengths, flat corners)."""
-    from tracer.meshio import _fan
+    from whitted.tracer.meshio import _fan
 
     for c in "xyz":
         if c not in cols:
@@ -278,7 +278,7 @@ def _lists(lists) -> tuple[list[int], np.ndarray]:
 
 
 def read_whitted(path):
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     meshio.clear_cache()
     m = meshio.load_mesh(path)
@@ -455,7 +455,7 @@ CANDIDATES = {
 
 def differs(got: dict, exp: dict) -> str | None:
     if got.get("normalized") and exp["normals"] is not None:
-        from tracer.meshio import _normalized
+        from whitted.tracer.meshio import _normalized
 
         exp = dict(exp, normals=_normalized(exp["normals"]))
     for k in ("vertices", "faces", "normals", "uvs"):

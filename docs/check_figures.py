@@ -29,7 +29,7 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 GLASS = ROOT / "tests" / "data" / "glass_before_lights.toml"
 
@@ -37,13 +37,13 @@ GLASS = ROOT / "tests" / "data" / "glass_before_lights.toml"
 def main() -> None:
     import numpy as np
 
-    from reference import mitsuba
-    from reference.check import judge_image, path_variance, tracer_reference
-    from reference.mitsuba_scene import load
-    from reference.user_image import UserImage, code_steps, decode
-    from tracer import load_scene
-    from tracer.imageio import to_srgb8
-    from tracer.integrator import material_ids
+    from whitted.reference import mitsuba
+    from whitted.reference.check import judge_image, path_variance, tracer_reference
+    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.user_image import UserImage, code_steps, decode
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import to_srgb8
+    from whitted.tracer.integrator import material_ids
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scenes", nargs="*",

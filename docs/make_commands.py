@@ -283,7 +283,7 @@ def _section(name: str, sp: argparse.ArgumentParser) -> list[str]:
 
 def render() -> str:
     """The text of docs/commands.md."""
-    from reference.cli import build_parser
+    from whitted.reference.cli import build_parser
 
     parser = build_parser()
     subs = _subcommands(parser)

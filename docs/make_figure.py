@@ -9,15 +9,15 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 
 def main() -> None:
     from PIL import Image, ImageDraw
 
-    from reference.compare import compare_scene
-    from tracer import load_scene
-    from tracer.imageio import to_srgb8
+    from whitted.reference.compare import compare_scene
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import to_srgb8
 
     name = sys.argv[1] if len(sys.argv) > 1 else "glass_sphere"
     scene = load_scene(ROOT / "scenes" / f"{name}.toml")

@@ -25,14 +25,20 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
-import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
 
 
 def main() -> None:
     import numpy as np
 
-    from reference.compare import image_metrics, judge, region_test, statistical_comparison, z_test
-    from tracer import load_scene
+    from whitted.reference.compare import (
+        image_metrics,
+        judge,
+        region_test,
+        statistical_comparison,
+        z_test,
+    )
+    from whitted.tracer import load_scene
 
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("scenes", nargs="*", default=["glass_sphere", "emitter_in_glass",

@@ -5,12 +5,12 @@ is chosen before Dr.Jit (and Mitsuba, which loads it) start. Mitsuba itself is
 imported on demand by :func:`mitsuba`, never by ``whitted render``.
 """
 
-import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 
 
 def mitsuba():
     """Mitsuba, with the variant of the tracer's backend set and our plugins registered."""
-    from tracer import backend
+    from whitted.tracer import backend
 
     backend.use()
     import mitsuba as mi
@@ -18,7 +18,7 @@ def mitsuba():
     variant = backend.mitsuba_variant()
     if mi.variant() != variant:
         mi.set_variant(variant)
-    from reference import (
+    from whitted.reference import (
         emitters,
         integrators,  # noqa: F401  (registers the `whitted` integrator)
         materials,

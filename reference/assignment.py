@@ -76,8 +76,8 @@ class Result:
 
 def scene_at(size: int, depth: int | None = None):
     """heckbert_minray at size x size (and DEPTH)."""
-    from reference.cli import SCENES_DIR
-    from tracer import load_scene
+    from whitted.scenes import SCENES_DIR
+    from whitted.tracer import load_scene
 
     s = load_scene(SCENES_DIR / "heckbert_minray.toml").with_overrides(size=(size, size))
     return s if depth is None else s.with_overrides(max_depth=depth + 1)
@@ -86,9 +86,9 @@ def scene_at(size: int, depth: int | None = None):
 def run(outdir: Path, size: int = 256, sweep: tuple[int, ...] = SWEEP_DEPTHS, repeat: int = 3,
         mitsuba: bool = True, log=print) -> Result:
     """Write the assignment's files into ``outdir`` (see the module docstring)."""
-    from reference.minray import ray_count
-    from tracer.imageio import ppm_values
-    from tracer.integrator import Integrator
+    from whitted.reference.minray import ray_count
+    from whitted.tracer.imageio import ppm_values
+    from whitted.tracer.integrator import Integrator
 
     start = time.perf_counter()
     outdir.mkdir(parents=True, exist_ok=True)
@@ -131,9 +131,9 @@ def run(outdir: Path, size: int = 256, sweep: tuple[int, ...] = SWEEP_DEPTHS, re
 
 def transparent_pixels(scene) -> np.ndarray:
     """H x W mask of the pixels whose camera ray first hits a transparent (kt > 0) surface."""
-    from tracer.camera import generate_rays
-    from tracer.geometry import Geometry
-    from tracer.sampling import pixel_samples
+    from whitted.tracer.camera import generate_rays
+    from whitted.tracer.geometry import Geometry
+    from whitted.tracer.sampling import pixel_samples
 
     W, H = scene.film.width, scene.film.height
     geo = Geometry(scene)
@@ -152,7 +152,7 @@ def transparent_pixels(scene) -> np.ndarray:
 
 def _save_picture(path: Path, values: np.ndarray) -> Path:
     """An 8-bit PNG holding a PPM's numbers unchanged (values above 255 cannot be kept)."""
-    from tracer.imageio import write_png
+    from whitted.tracer.imageio import write_png
 
     write_png(path, np.clip(values, 0, 255).astype(np.uint8))
     return path
@@ -222,9 +222,16 @@ def _plot_runtimes(rows: list[SweepRow], path: Path, size: int) -> None:
 
 def light_paths(path: Path, size: int, picture: np.ndarray, mitsuba: bool) -> Path:
     """The DEPTH 5 picture with LE, LDE, LSE, LDSE trees and LDDE, LSDE examples (module doc)."""
-    from reference.cli import SCENES_DIR
-    from reference.paths import WANTED, draw, example_paths, ldde_lsde_panel, pick_pixels, ray_trees
-    from tracer import load_scene
+    from whitted.reference.paths import (
+        WANTED,
+        draw,
+        example_paths,
+        ldde_lsde_panel,
+        pick_pixels,
+        ray_trees,
+    )
+    from whitted.scenes import SCENES_DIR
+    from whitted.tracer import load_scene
 
     scene = scene_at(size, 5)
     picked = pick_pixels(scene, spread=max(2, size // 12))

@@ -110,7 +110,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from reference.compare import (
+from whitted.reference.compare import (
     FLOAT_SIGMA,
     POWER_Z,
     REGION_ALPHA,
@@ -186,7 +186,7 @@ def quadrature_error(scene, image: np.ndarray, seed: int = 0) -> np.ndarray:
     A renderer that samples the strata centres, as the reference does, differs by
     none of it.
     """
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     n = scene.film.strata
     pixels = scene.film.width * scene.film.height
@@ -201,8 +201,8 @@ def quadrature_error(scene, image: np.ndarray, seed: int = 0) -> np.ndarray:
 
 def tracer_reference(scene, seed: int = 0) -> Reference:
     """The tracer's image at the scene's strata: deterministic, or the mean of seeds."""
-    from reference.compare import TRACER_SEEDS, tracer_pooled
-    from tracer.integrator import Integrator
+    from whitted.reference.compare import TRACER_SEEDS, tracer_pooled
+    from whitted.tracer.integrator import Integrator
 
     spp = scene.film.strata ** 2
     if scene.samples_lights():
@@ -221,9 +221,9 @@ def tracer_reference(scene, seed: int = 0) -> Reference:
 
 def mitsuba_reference(scene, seed: int = 0) -> Reference:
     """Mitsuba's deterministic reference (reference.deterministic), at the tracer's seeds."""
-    from reference.compare import TRACER_SEEDS
-    from reference.render import render_reference
-    from tracer.sampling import seed32
+    from whitted.reference.compare import TRACER_SEEDS
+    from whitted.reference.render import render_reference
+    from whitted.tracer.sampling import seed32
 
     seeds = TRACER_SEEDS if scene.samples_lights() else 1
     images = [render_reference(scene, "deterministic", seed=(seed32(seed) + k) & 0xFFFFFFFF)
@@ -244,9 +244,9 @@ def path_variance(scene, samples: int = SPP_MODEL_SAMPLES, seed: int = 0) -> np.
     second moments; E[x^2] - E[x]^2 over ``samples`` jittered samples is the
     variance of one sample placed uniformly in the pixel.
     """
-    from reference import mitsuba
-    from reference.mitsuba_scene import scene_tree, to_dict
-    from tracer.limits import check_render
+    from whitted.reference import mitsuba
+    from whitted.reference.mitsuba_scene import scene_tree, to_dict
+    from whitted.tracer.limits import check_render
 
     mi = mitsuba()
     strata = math.isqrt(samples)
@@ -658,7 +658,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     """
     import time
 
-    from tracer.integrator import material_ids
+    from whitted.tracer.integrator import material_ids
 
     say = log or (lambda *_: None)
     start = time.perf_counter()
@@ -675,7 +675,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     run = CheckRun(user.path, scene.name, user.storage, result.passed, result.warned, spp,
                    result)
     if mitsuba:
-        from reference.compare import image_metrics, judge
+        from whitted.reference.compare import image_metrics, judge
 
         say("rendering Mitsuba's deterministic reference")
         mref = mitsuba_reference(scene, seed)
@@ -692,7 +692,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
         say("splitting the difference by light path and material")
         run.decomposition = decomposition(scene, result, ids, names, seed)
     if suspects and not result.passed:
-        from reference.suspects import rank_catalog
+        from whitted.reference.suspects import rank_catalog
 
         say("ranking the catalog's formula bugs by how much of the difference each explains")
         a = result.arrays
@@ -705,7 +705,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
 def decomposition(scene, result: CheckResult, ids: np.ndarray, names: list[str],
                   seed: int = 0) -> dict:
     """The failing image's difference by light path and by first-hit material."""
-    from reference.suspects import light_path_fit, light_path_images, material_split
+    from whitted.reference.suspects import light_path_fit, light_path_images, material_split
 
     a = result.arrays
     parts = light_path_images(scene, seed)
@@ -723,13 +723,13 @@ def format_run(run: CheckRun, title: str) -> str:
                    f"{'pass' if rv['passed'] else 'FAIL'}")
         out.append(format_check(run.mitsuba, "the image against Mitsuba's reference:", run.spp))
     if run.decomposition:
-        from reference.suspects import MaterialPart, PathFit, format_decomposition
+        from whitted.reference.suspects import MaterialPart, PathFit, format_decomposition
 
         d = run.decomposition
         out.append(format_decomposition([PathFit(**p) for p in d["light_paths"]],
                                         [MaterialPart(**m) for m in d["materials"]]))
     if run.suspects is not None:
-        from reference.suspects import SuspectFit, format_suspects
+        from whitted.reference.suspects import SuspectFit, format_suspects
 
         sp = run.suspects
         out.append(format_suspects([SuspectFit(**f) for f in sp["top"]]) +
@@ -753,7 +753,7 @@ def side_by_side(image: np.ndarray, reference: np.ndarray, failing: np.ndarray, 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from tracer.imageio import to_srgb8
+    from whitted.tracer.imageio import to_srgb8
 
     a, b = to_srgb8(image), to_srgb8(reference)
     grey = (0.3 * b.mean(-1, keepdims=True) + 60).astype(np.uint8).repeat(3, -1)
@@ -786,7 +786,7 @@ def refuse_in_the_way(folder, names) -> None:
     import os
     from pathlib import Path
 
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     for n in names:
         p = Path(folder) / n
@@ -804,9 +804,9 @@ def write_outputs(run: CheckRun, outdir, title: str, final=None) -> dict:
     """
     from pathlib import Path
 
-    from reference.compare import heat_map, pixel_relative_difference, write_json
-    from tracer.errors import UserError
-    from tracer.imageio import write_exr
+    from whitted.reference.compare import heat_map, pixel_relative_difference, write_json
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.imageio import write_exr
 
     out = Path(outdir)
     run.files = {k: str(Path(final or out) / k) for k in OUTPUT_NAMES}
@@ -867,7 +867,7 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
     import base64
     import html
 
-    from reference.viewer import assets, viewer
+    from whitted.reference.viewer import assets, viewer
 
     esc = html.escape
     r = run.result

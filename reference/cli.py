@@ -18,9 +18,10 @@ import sys
 import time
 from pathlib import Path
 
-EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
+from whitted import scenes
+from whitted.scenes import SCENES_DIR, builtin_scenes  # noqa: F401  (re-exported)
 
-SCENES_DIR = Path(__file__).resolve().parent.parent / "scenes"
+EXIT_OK, EXIT_FAIL, EXIT_USAGE = 0, 1, 2
 
 
 # ---------------------------------------------------------------- helpers
@@ -53,30 +54,19 @@ def _positive(text: str) -> int:
 
 def resolve_scene(name: str) -> Path:
     """A scene path, or a built-in scene's name (``sphere_point``: scenes/sphere_point.toml)."""
-    p = Path(name)
-    try:
-        if p.exists() or p.suffix == ".toml" or os.sep in name:
-            return p
-        builtin = SCENES_DIR / f"{name}.toml"
-        return builtin if builtin.exists() else p
-    except (OSError, ValueError):  # a name too long, or with a NUL: load_scene says why
-        return p
-
-
-def builtin_scenes() -> list[Path]:
-    return sorted(SCENES_DIR.glob("*.toml"))
+    return scenes.resolve(name)
 
 
 def output_folder(path) -> Path:
     """An output folder that may exist already, but not as a file, and that can be written."""
-    from tracer.imageio import check_output_folder
+    from whitted.tracer.imageio import check_output_folder
 
     return check_output_folder(path)
 
 
 def load_scene_arg(args):
     """SCENE as given: a TOML scene, a built-in name, or Mitsuba XML (read without Mitsuba)."""
-    from tracer.scene import load_any
+    from whitted.tracer.scene import load_any
 
     return load_any(resolve_scene(args.scene), getattr(args, "approximate", False),
                     warn=lambda line: print(f"warning: {line}", flush=True))
@@ -93,7 +83,7 @@ def _max_depth(args) -> int | None:
     if depth is None:
         return args.max_depth
     if args.max_depth is not None:
-        from tracer.errors import UserError
+        from whitted.tracer.errors import UserError
 
         raise UserError("give either --depth (Heckbert's DEPTH) or --max-depth "
                         "(= DEPTH + 1), not both")
@@ -104,7 +94,7 @@ def check_finite(image, what: str = "the render") -> None:
     """Refuse to write an image with infinite or NaN pixels (float32 overflowed)."""
     import numpy as np
 
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     bad = int(np.count_nonzero(~np.isfinite(image)))
     if bad:
@@ -115,7 +105,7 @@ def check_finite(image, what: str = "the render") -> None:
 
 def shown(path) -> str:
     """A path as printed: bytes that are not UTF-8 escaped."""
-    from tracer.errors import one_line
+    from whitted.tracer.errors import one_line
 
     return one_line(str(path), 300)
 
@@ -149,7 +139,7 @@ class Progress:
 
 
 def _backend(args) -> str:
-    from tracer import backend
+    from whitted.tracer import backend
 
     return backend.use(args.backend)
 
@@ -164,23 +154,23 @@ def _describe(scene) -> str:
 
 
 def cmd_render(args) -> int:
-    from tracer.imageio import check_output_path, write_image
+    from whitted.tracer.imageio import check_output_path, write_image
 
     out = check_output_path(args.output)
     if args.lpe is not None:
-        from tracer.lpe import compile_lpe
+        from whitted.tracer.lpe import compile_lpe
 
         compile_lpe(args.lpe)  # refuse a bad expression before anything renders
     scene = load(args)
-    from tracer.limits import check_render
+    from whitted.tracer.limits import check_render
 
     check_render(scene)
     _note_spp(scene)
     name = _backend(args)
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     if not args.min_weight >= 0:
-        from tracer.errors import UserError
+        from whitted.tracer.errors import UserError
 
         raise UserError(f"--min-weight: expected a number >= 0, got {args.min_weight}")
     result = Integrator(scene, seed=args.seed, lpe=args.lpe, min_weight=args.min_weight).render(
@@ -195,18 +185,18 @@ def cmd_render(args) -> int:
 
 
 def cmd_reference(args) -> int:
-    from tracer.imageio import check_output_path, write_image
+    from whitted.tracer.imageio import check_output_path, write_image
 
     out = check_output_path(args.output)
     if args.renderer == "luxcore":
         return _reference_luxcore(args, out)
     scene = load(args)
-    from tracer.limits import check_render
+    from whitted.tracer.limits import check_render
 
     check_render(scene, mitsuba=True)
     _note_spp(scene)
     name = _backend(args)
-    from reference.render import render_reference
+    from whitted.reference.render import render_reference
 
     result = render_reference(scene, args.integrator, seed=args.seed)
     check_finite(result.image, "Mitsuba's render")
@@ -218,16 +208,16 @@ def cmd_reference(args) -> int:
 
 def _reference_luxcore(args, out) -> int:
     """``whitted reference --renderer luxcore``: LuxCore's image, spp jittered samples a pixel."""
-    from reference import luxcore
-    from tracer.errors import UserError
-    from tracer.imageio import write_image
+    from whitted.reference import luxcore
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.imageio import write_image
 
     luxcore.require()
     if args.integrator != "whitted":
         raise UserError("--integrator: Mitsuba's integrators only; LuxCore renders with its "
                         "path tracer at Whitted's depths (reference/luxcore_scene.py)")
     scene = load(args)
-    from reference.luxcore_scene import describe
+    from whitted.reference.luxcore_scene import describe
 
     describe(scene)  # refuse in one line before the child starts
     _note_spp(scene)
@@ -325,10 +315,10 @@ def format_three_way(t) -> str:
 
 def _compare_luxcore(args, scene, main=None) -> int:
     """The three-way comparison of ``whitted compare --renderer luxcore|all``."""
-    from reference import luxcore
-    from reference.compare import write_json
-    from reference.luxcore_compare import compare_three
-    from tracer.errors import UserError
+    from whitted.reference import luxcore
+    from whitted.reference.compare import write_json
+    from whitted.reference.luxcore_compare import compare_three
+    from whitted.tracer.errors import UserError
 
     luxcore.require()
     [t] = compare_three([scene], progress=Progress(f"luxcore {scene.name}"),
@@ -347,12 +337,12 @@ def _compare_luxcore(args, scene, main=None) -> int:
 
 
 def cmd_compare(args) -> int:
-    from reference.compare import choose_test, comparable, compare_scene
-    from tracer.errors import UserError
-    from tracer.limits import check_render
+    from whitted.reference.compare import choose_test, comparable, compare_scene
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.limits import check_render
 
     if args.renderer != "mitsuba":
-        from reference import luxcore
+        from whitted.reference import luxcore
 
         luxcore.require()   # before anything renders
     scene = load(args)
@@ -386,7 +376,7 @@ def cmd_compare(args) -> int:
         try:
             return _compare_luxcore(args, scene, result)
         except UserError as e:   # LuxCore failed or ran past its limits: the vote is optional
-            from tracer.errors import one_line
+            from whitted.tracer.errors import one_line
 
             print(f"note: LuxCore (the third renderer's vote): not available: "
                   f"{one_line(str(e), 300)}", file=sys.stderr, flush=True)
@@ -395,7 +385,7 @@ def cmd_compare(args) -> int:
 
 def _reference_option(args) -> str:
     """``--reference``, or the reference that the older ``--integrator`` option names."""
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     legacy = {"whitted": "onelobe", "direct": "direct"}
     if args.integrator is not None:
@@ -408,14 +398,14 @@ def _reference_option(args) -> str:
 
 
 def cmd_export(args) -> int:
-    from tracer.imageio import check_output_path
+    from whitted.tracer.imageio import check_output_path
 
     out = check_output_path(args.output, (".xml",), "file type")
     scene = load(args)
-    from tracer.limits import check_depth
+    from whitted.tracer.limits import check_depth
 
     check_depth(scene.film.max_depth)  # Mitsuba reads it as a 32-bit integer
-    from reference.mitsuba_scene import write_xml
+    from whitted.reference.mitsuba_scene import write_xml
 
     files = write_xml(scene, out, args.integrator)
     print("wrote " + ", ".join(shown(f) for f in files))
@@ -423,10 +413,10 @@ def cmd_export(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from reference.importer import write_import
-    from tracer.errors import UserError
-    from tracer.imageio import check_output_path
-    from tracer.mitsuba_xml import VALUE_SHOWN
+    from whitted.reference.importer import write_import
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.imageio import check_output_path
+    from whitted.tracer.mitsuba_xml import VALUE_SHOWN
 
     out = check_output_path(args.output, (".toml",), "file type")
     params = {}
@@ -447,7 +437,7 @@ def cmd_import(args) -> int:
 
 
 def cmd_fresnel(args) -> int:
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     for ior in args.ior:
         if not (ior > 0 and ior < 1e6):
@@ -456,7 +446,7 @@ def cmd_fresnel(args) -> int:
         raise UserError(f"--samples: expected at least 100, got {args.samples}")
     if not 0 < args.step <= 45:
         raise UserError(f"--step: expected a number of degrees in (0, 45], got {args.step:g}")
-    from tracer import limits
+    from whitted.tracer import limits
 
     # Per index and side, one table row per angle step, each sampled --samples times.
     per_table = (int(90 / args.step) + 2) * args.samples
@@ -464,7 +454,7 @@ def cmd_fresnel(args) -> int:
     limits.check_memory(per_table * limits.FRESNEL_BYTES_PER_SAMPLE, "the Fresnel table")
     out = output_folder(args.output)
     _backend(args)
-    from reference.fresnel_curves import fresnel_table, write_outputs
+    from whitted.reference.fresnel_curves import fresnel_table, write_outputs
 
     table = fresnel_table(tuple(args.ior), args.step, args.samples, args.seed)
     files = write_outputs(table, out)
@@ -499,8 +489,8 @@ def format_fresnel(table) -> str:
 
 
 def cmd_report(args) -> int:
-    from reference.report import build_report, select_scenes
-    from tracer.errors import UserError
+    from whitted.reference.report import build_report, select_scenes
+    from whitted.tracer.errors import UserError
 
     scenes_dir = Path(args.scenes_dir) if args.scenes_dir else SCENES_DIR
     if not scenes_dir.is_dir():
@@ -509,7 +499,7 @@ def cmd_report(args) -> int:
     if not paths:
         raise UserError(f"no scene in {scenes_dir} matches {args.scenes!r}")
     out = output_folder(args.output)
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     for p in paths:  # refuse a bad scene before any rendering
         load_scene(p)
@@ -549,9 +539,9 @@ def _report_luxcore(args) -> bool:
 
 
 def cmd_mutants(args) -> int:
-    from reference import mutants
-    from reference.report import select_scenes
-    from tracer.errors import UserError
+    from whitted.reference import mutants
+    from whitted.reference.report import select_scenes
+    from whitted.tracer.errors import UserError
 
     if args.list:
         print(mutants.catalog_table())
@@ -564,7 +554,7 @@ def cmd_mutants(args) -> int:
     if not paths:
         raise UserError(f"no scene in {scenes_dir} matches {args.scenes!r}")
     out = output_folder(args.output) if args.output else None
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     for p in paths:  # refuse a bad scene before any rendering
         load_scene(p)
@@ -576,7 +566,7 @@ def cmd_mutants(args) -> int:
                            log=lambda m: print(m, flush=True))
     print(mutants.format_table(result))
     if out is not None:
-        from reference.compare import write_json
+        from whitted.reference.compare import write_json
 
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / "mutants.json", result.to_json())
@@ -590,8 +580,8 @@ MAX_REPEAT = 100
 
 
 def cmd_depth_sweep(args) -> int:
-    from reference.depth_sweep import depth_sweep, explain, parse_depths, write_outputs
-    from tracer.errors import UserError
+    from whitted.reference.depth_sweep import depth_sweep, explain, parse_depths, write_outputs
+    from whitted.tracer.errors import UserError
 
     depths = parse_depths(args.depths)
     if not 1 <= args.repeat <= MAX_REPEAT:
@@ -600,8 +590,8 @@ def cmd_depth_sweep(args) -> int:
     if not args.min_weight >= 0:
         raise UserError(f"--min-weight: expected a number >= 0, got {args.min_weight}")
     scene = load(args)
-    from tracer.imageio import StagedFolder
-    from tracer.limits import check_render
+    from whitted.tracer.imageio import StagedFolder
+    from whitted.tracer.limits import check_render
 
     deepest = scene.with_overrides(max_depth=max(depths) + 1)
     check_render(deepest)
@@ -626,11 +616,11 @@ def cmd_depth_sweep(args) -> int:
 
 
 def cmd_paths(args) -> int:
-    from tracer.imageio import check_output_path
+    from whitted.tracer.imageio import check_output_path
 
     out = check_output_path(args.output, (".png",))
     scene = load(args)
-    from reference.paths import (
+    from whitted.reference.paths import (
         MAX_PIXELS,
         WANTED,
         draw,
@@ -639,8 +629,8 @@ def cmd_paths(args) -> int:
         pick_pixels,
         ray_trees,
     )
-    from tracer.errors import UserError
-    from tracer.limits import check_render
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.limits import check_render
 
     if len(args.pixel or []) > MAX_PIXELS:
         raise UserError(f"--pixel: at most {MAX_PIXELS} pixels, got {len(args.pixel):,}")
@@ -649,7 +639,7 @@ def cmd_paths(args) -> int:
     if not args.no_mitsuba:
         check_render(scene.with_overrides(max_depth=3, spp=64), mitsuba=True)
     _backend(args)
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     notes = []
     if not pixels:
@@ -682,8 +672,8 @@ def cmd_paths(args) -> int:
 
 
 def cmd_assignment(args) -> int:
-    from reference.depth_sweep import parse_depths
-    from tracer.errors import UserError
+    from whitted.reference.depth_sweep import parse_depths
+    from whitted.tracer.errors import UserError
 
     depths = tuple(parse_depths(args.depths))
     if max(depths) < 5:
@@ -693,7 +683,7 @@ def cmd_assignment(args) -> int:
         raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
     out = output_folder(args.output)
     _backend(args)
-    from reference.assignment import run
+    from whitted.reference.assignment import run
 
     print(f"whitted assignment: heckbert_minray at {args.size}x{args.size}, DEPTH "
           f"{', '.join(map(str, depths))} -> {out}/", flush=True)
@@ -704,7 +694,7 @@ def cmd_assignment(args) -> int:
 
 
 def cmd_scenes(args) -> int:
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     for p in builtin_scenes():
         s = load_scene(p)
@@ -713,12 +703,12 @@ def cmd_scenes(args) -> int:
 
 
 def cmd_schema(args) -> int:
-    from tracer.schema import schema_text
+    from whitted.tracer.schema import schema_text
 
     if args.output is None:
         sys.stdout.write(schema_text())
         return EXIT_OK
-    from tracer.imageio import check_output_path
+    from whitted.tracer.imageio import check_output_path
 
     out = check_output_path(args.output, (".json",), "file type")
     out.write_text(schema_text())
@@ -728,8 +718,8 @@ def cmd_schema(args) -> int:
 
 def _thresholds(args):
     """OpenImageIO idiff's thresholds from the options (None where not given), checked."""
-    from reference.check import Thresholds
-    from tracer.errors import UserError
+    from whitted.reference.check import Thresholds
+    from whitted.tracer.errors import UserError
 
     th = Thresholds(**{k: getattr(args, k, None) for k in
                        ("fail", "fail_percent", "hard_fail", "warn", "warn_percent", "hard_warn")})
@@ -745,10 +735,10 @@ def _thresholds(args):
 
 
 def cmd_check(args) -> int:
-    from reference.check import check_image, format_run, write_outputs
-    from reference.user_image import read_user_image
-    from tracer.errors import UserError
-    from tracer.limits import check_render
+    from whitted.reference.check import check_image, format_run, write_outputs
+    from whitted.reference.user_image import read_user_image
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.limits import check_render
 
     th = _thresholds(args)
     user = read_user_image(args.image, args.encoding)   # bad input before any rendering
@@ -764,14 +754,14 @@ def cmd_check(args) -> int:
     if args.mitsuba or args.spp is not None:
         check_render(scene, mitsuba=True)
     if args.mitsuba:
-        from reference.deterministic import shares_light_samples
+        from whitted.reference.deterministic import shares_light_samples
 
         if not shares_light_samples(scene):
             raise UserError(f"--mitsuba: an emitter of {scene.name} has no shared light "
                             "samples (reference.deterministic.SAMPLE_MAPS), so Mitsuba's "
                             "deterministic reference cannot render it")
-    from reference.check import OUTPUT_NAMES, refuse_in_the_way
-    from tracer.imageio import StagedFolder
+    from whitted.reference.check import OUTPUT_NAMES, refuse_in_the_way
+    from whitted.tracer.imageio import StagedFolder
 
     outdir = output_folder(args.output or Path("out") / "check" /
                            f"{scene.name}-{Path(args.image).stem}")
@@ -792,8 +782,8 @@ def cmd_check(args) -> int:
 
 
 def cmd_suite(args) -> int:
-    from reference import suite
-    from tracer.errors import UserError
+    from whitted.reference import suite
+    from whitted.tracer.errors import UserError
 
     given = {"--suite": args.suite, "--update": args.update or None,
              "--encoding": args.encoding, "--spp": args.spp}
@@ -804,9 +794,9 @@ def cmd_suite(args) -> int:
         paths = suite.select(builtin_scenes(), args.scenes)
         if not paths:
             raise UserError(f"no built-in scene matches {args.scenes!r}")
-        from tracer import load_scene
-        from tracer.imageio import StagedFolder
-        from tracer.limits import check_render
+        from whitted.tracer import load_scene
+        from whitted.tracer.imageio import StagedFolder
+        from whitted.tracer.limits import check_render
 
         for p in paths:   # refuse a bad scene before any rendering
             check_render(load_scene(p), moments=True)
@@ -829,12 +819,12 @@ def cmd_suite(args) -> int:
     if suite_dir is not None and not suite_dir.is_dir():
         raise UserError(f"{shown(suite_dir)}: no such suite folder")
     if args.encoding is not None:
-        from reference.user_image import ENCODINGS
+        from whitted.reference.user_image import ENCODINGS
 
         if args.encoding not in ENCODINGS:
             raise UserError(f"--encoding: expected one of {', '.join(ENCODINGS)}")
-    from reference.check import refuse_in_the_way
-    from tracer.imageio import StagedFolder
+    from whitted.reference.check import refuse_in_the_way
+    from whitted.tracer.imageio import StagedFolder
 
     # Everything read and checked before any rendering: the manifest, its paths, and
     # that every file the command will write can be written.
@@ -888,7 +878,7 @@ class Parser(argparse.ArgumentParser):
     def error(self, message: str):
         import re
 
-        from tracer.errors import one_line
+        from whitted.tracer.errors import one_line
 
         message = re.sub(rf"\S{{{ECHO_LIMIT + 1},}}", lambda m: shorten(m.group()),
                          one_line(message, 1 << 20))
@@ -1348,7 +1338,7 @@ def _caused_by(e: BaseException, kind: type) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    from tracer.errors import one_line
+    from whitted.tracer.errors import one_line
 
     # A name that is not UTF-8 reaches Python as surrogates: print them escaped.
     for stream in (sys.stdout, sys.stderr):
@@ -1367,8 +1357,8 @@ def main(argv: list[str] | None = None) -> int:
             args = parser.parse_args(argv)
         except SystemExit as e:  # --help, --version, or a one-line parser error
             return e.code if isinstance(e.code, int) else EXIT_USAGE
-        from tracer import backend, llvm
-        from tracer.errors import UserError
+        from whitted.tracer import backend, llvm
+        from whitted.tracer.errors import UserError
 
         try:
             rc = args.func(args)
@@ -1414,7 +1404,7 @@ def entrypoint() -> None:
     steps against /usr/bin/time). So the streams are flushed and the process
     leaves with os._exit; should a flush fail, Python's own exit reports it.
     """
-    from reference.malloc import keep_freed_memory
+    from whitted.reference.malloc import keep_freed_memory
 
     keep_freed_memory()
     rc = main()

@@ -673,15 +673,15 @@ def tracer_pooled(scene, seeds: int = TRACER_SEEDS, first_seed: int = 0) -> Pool
     Sidak-corrected test (measured: 99.65 % of pixels passing on the Heckbert
     scene, against 100 % with 16 seeds).
     """
-    from reference.shared import reused
+    from whitted.reference.shared import reused
 
     return reused(lambda: _tracer_pooled(scene, seeds, first_seed), scene, "tracer pooled",
                   seeds, first_seed)
 
 
 def _tracer_pooled(scene, seeds: int, first_seed: int) -> PooledTracer:
-    from tracer.integrator import Integrator
-    from tracer.sampling import seed32
+    from whitted.tracer.integrator import Integrator
+    from whitted.tracer.sampling import seed32
 
     m1 = m2 = 0.0
     s1 = s2 = 0.0
@@ -702,8 +702,8 @@ def _tracer_pooled(scene, seeds: int, first_seed: int) -> PooledTracer:
 def shared_tracer_image(scene, seed: int = 0) -> np.ndarray:
     """The tracer's image of ``scene``; inside :func:`reference.shared.shared`, rendered
     once while no bug is switched on."""
-    from reference.shared import reused
-    from tracer.integrator import Integrator
+    from whitted.reference.shared import reused
+    from whitted.tracer.integrator import Integrator
 
     return reused(lambda: Integrator(scene, seed=seed).render().image, scene, "tracer image",
                   seed)
@@ -765,8 +765,8 @@ def statistical_comparison(scene, tracer_image: np.ndarray | None = None,
     :data:`TRACER_SEEDS` seeds from ``tracer_seed`` on. ``seed`` is the
     reference's first pass seed.
     """
-    from reference.render import render_reference
-    from tracer.integrator import Integrator
+    from whitted.reference.render import render_reference
+    from whitted.tracer.integrator import Integrator
 
     if tracer_image is None and not scene.samples_lights():
         tracer_image = Integrator(scene).render().image
@@ -792,7 +792,7 @@ def statistical_verdict(scene, ref, tracer_image: np.ndarray | None = None,
     ``regions`` (rule 4's regions) are computed from the scene when None.
     ``with_flip``: also the FLIP metric, which is reported, never judged.
     """
-    from tracer.integrator import Integrator, material_ids
+    from whitted.tracer.integrator import Integrator, material_ids
 
     if tracer_image is None and not scene.samples_lights():
         tracer_image = Integrator(scene).render().image
@@ -852,12 +852,12 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
     (the tracer's area-light samples, which the deterministic reference reads too,
     and the one-lobe reference's lobe and light choices).
     """
-    from reference.deterministic import shares_light_samples
-    from reference.render import render_reference
-    from tracer import backend
-    from tracer.imageio import write_exr
-    from tracer.integrator import Integrator
-    from tracer.scene import TRACER_ONLY
+    from whitted.reference.deterministic import shares_light_samples
+    from whitted.reference.render import render_reference
+    from whitted.tracer import backend
+    from whitted.tracer.imageio import write_exr
+    from whitted.tracer.integrator import Integrator
+    from whitted.tracer.scene import TRACER_ONLY
 
     reference = reference_name(reference)
     scene = at_strata_centres(scene)
@@ -942,7 +942,7 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
         expected_deviation=deviation, reference=reference, second_opinion=second,
         tracer_only_model=model)
     if outdir is not None:
-        from tracer.errors import UserError
+        from whitted.tracer.errors import UserError
 
         for side, img in (("the tracer's", full_image), ("Mitsuba's", ref.image)):
             if not np.isfinite(img).all():
@@ -979,8 +979,8 @@ def tracer_only_model_check(full_scene, full_image: np.ndarray, seed: int = 0) -
     the deterministic reference with that model too, by the same float-precision
     test, so that a wrong Schlick fails. None where no declared part has a model.
     """
-    from reference.materials import has_tracer_only_models, tracer_only_model
-    from reference.render import deterministic_image
+    from whitted.reference.materials import has_tracer_only_models, tracer_only_model
+    from whitted.reference.render import deterministic_image
 
     if not has_tracer_only_models(full_scene):
         return None

@@ -21,7 +21,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 #: Deepest DEPTH a sweep renders (max_depth = DEPTH + 1).
 MAX_SWEEP_DEPTH = 200
@@ -66,9 +66,9 @@ class DepthRow:
 
 def depth_sweep(scene, depths: list[int], repeat: int, outdir: Path, mitsuba: bool = True,
                 log=print, min_weight: float = 0.0, seed: int = 0) -> list[DepthRow]:
-    from reference.render import render_reference
-    from tracer.imageio import write_png
-    from tracer.integrator import Integrator
+    from whitted.reference.render import render_reference
+    from whitted.tracer.imageio import write_png
+    from whitted.tracer.integrator import Integrator
 
     outdir.mkdir(parents=True, exist_ok=True)
     rows = []

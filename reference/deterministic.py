@@ -59,10 +59,10 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from reference.shading import Terms
-from tracer.backend import jit
-from tracer.sampling import light_sample, pixel_samples
-from tracer.scene import Disk, Rectangle, Scene, Sphere, Triangle
+from whitted.reference.shading import Terms
+from whitted.tracer.backend import jit
+from whitted.tracer.sampling import light_sample, pixel_samples
+from whitted.tracer.scene import Disk, Rectangle, Scene, Sphere, Triangle
 
 #: Samples in flight at once (whole pixels), as in the tracer on the CPU.
 CHUNK_SAMPLES = 1 << 21
@@ -99,7 +99,7 @@ def shares_light_samples(scene: Scene) -> bool:
     Every emitting shape needs a sample map (see SAMPLE_MAPS); a ``[[lights]]`` kind
     that is not delta (a light the tracer samples, such as one at infinity) has none.
     """
-    from tracer.emitters import LIGHTS, type_of
+    from whitted.tracer.emitters import LIGHTS, type_of
 
     if any(_light_sample_map(light) is None for light in scene.lights
            if not LIGHTS[type_of(light)].Emitter.delta and
@@ -111,8 +111,8 @@ def shares_light_samples(scene: Scene) -> bool:
 def _light_sample_map(light) -> Callable | None:
     """The sample map of a ``[[lights]]`` kind Mitsuba samples as the tracer does (the
     ``sample_map`` of its conversion module, ``reference/emitters/``), or None."""
-    from reference.emitters import REGISTRY
-    from tracer.emitters import type_of
+    from whitted.reference.emitters import REGISTRY
+    from whitted.tracer.emitters import type_of
 
     return getattr(REGISTRY.get(type_of(light)), "sample_map", None)
 
@@ -136,7 +136,7 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
     tracer's points of the same light. Others (an environment that lights
     nothing) are handed any sample.
     """
-    from tracer.emitters import LIGHTS, type_of
+    from whitted.tracer.emitters import LIGHTS, type_of
 
     emitting = [i for i, s in enumerate(scene.shapes) if s.emitter is not None]
     # The tracer numbers its sampled lights: sampled [[lights]] first, then area emitters.
@@ -150,7 +150,7 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
             k = int(e.id().removeprefix("light_"))
             sample_map = _light_sample_map(scene.lights[k])
             if sample_map is not None:  # a light at infinity sampled as the tracer does
-                from reference.emitters import REGISTRY
+                from whitted.reference.emitters import REGISTRY
 
                 sampler = getattr(REGISTRY.get(type_of(scene.lights[k])), "direct_sample", None)
                 out.append(_Light(e, sampled.index(k), sample_map, sampler))
@@ -180,8 +180,8 @@ class DeterministicReference:
     def __init__(self, scene: Scene, seed: int = 0, models: bool = False):
         """``models``: the scene's tracer-only parts as the harness models them (Schlick's
         dielectric, ``reference/materials/dielectric.py``) instead of Mitsuba's equivalent."""
-        from reference import mitsuba
-        from reference.mitsuba_scene import load
+        from whitted.reference import mitsuba
+        from whitted.reference.mitsuba_scene import load
 
         self.mi = mi = mitsuba()
         self.scene = scene

@@ -95,9 +95,9 @@ def conductor_curves(mi, names=DEFAULT_CONDUCTORS, step: float = 0.5) -> list[di
     ``mi.fresnel_conductor`` in float32, within :func:`conductor_tolerance`, and both against
     the float64 complex form."""
 
-    from tracer import fresnel
-    from tracer.backend import jit
-    from tracer.ior import CONDUCTORS
+    from whitted.tracer import fresnel
+    from whitted.tracer.backend import jit
+    from whitted.tracer.ior import CONDUCTORS
 
     theta = np.arange(0, 90 + 1e-9, step)
     cos32 = np.cos(np.radians(theta)).astype(np.float32)
@@ -155,8 +155,8 @@ class FresnelTable:
 
 
 def _ours(cos_i: np.ndarray, eta: float):
-    from tracer import fresnel
-    from tracer.backend import jit
+    from whitted.tracer import fresnel
+    from whitted.tracer.backend import jit
 
     c = jit.Float(cos_i.astype(np.float32))
     e = jit.Float(np.float32(eta))
@@ -197,7 +197,7 @@ def _plugin_reflect_fraction(mi, ior: float, cos_i: np.ndarray, samples: int, se
 def fresnel_table(iors=DEFAULT_IORS, step: float = 0.5, samples: int = 100_000,
                   seed: int = 0) -> FresnelTable:
     """Tabulate and check the curves for every ior and both sides (see module doc)."""
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     mi = mitsuba()
     theta = np.arange(0, 90 + 1e-9, step)

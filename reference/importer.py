@@ -33,8 +33,9 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.errors import UserError, one_line
-from tracer.mitsuba_xml import Imported, read_xml
+from whitted.scenes import MITSUBA_DATA_DIR
+from whitted.tracer.errors import UserError, one_line
+from whitted.tracer.mitsuba_xml import Imported, read_xml
 
 # ---------------------------------------------------------------- TOML
 
@@ -139,7 +140,7 @@ def write_import(source: str | Path, output: str | Path, approximate: bool = Fal
     agrees on the camera and film (:func:`disagreements`); the file is renamed into
     place from a temporary one, and on any failure the meshes converted for it are
     removed, so that nothing is left behind."""
-    from tracer.imageio import _atomic_write
+    from whitted.tracer.imageio import _atomic_write
 
     output = Path(output)
     created: list[Path] = []
@@ -162,7 +163,7 @@ def check_toml(text: str | dict, output: str | Path):
     (``tomllib`` and the scene's validation, files relative to ``output``), else a
     :class:`UserError` saying that the tracer cannot load the import. A dictionary is
     validated as the document it is."""
-    from tracer.scene import parse_scene
+    from whitted.tracer.scene import parse_scene
 
     try:
         return parse_scene(tomllib.loads(text) if isinstance(text, str) else text, str(output))
@@ -217,7 +218,7 @@ def check_serialized(path: Path, index: int) -> tuple[int, int]:
     its meshes (Mitsuba's own check lets the one past the last through), counts the
     file cannot hold, and a mesh whose conversion would take more than
     ``WHITTED_MAX_MEMORY`` (Mitsuba allocates its buffers from these counts)."""
-    from tracer.limits import check_memory
+    from whitted.tracer.limits import check_memory
 
     def bad(why: str) -> UserError:
         return UserError(f"{one_line(path.name, 60)}: not a Mitsuba serialized mesh ({why})")
@@ -285,9 +286,9 @@ def _serialized_converter(folder: Path, stem: str, created: list | None = None):
     created = [] if created is None else created
 
     def convert(source: Path, index: int) -> Path:
-        from reference import mitsuba
-        from reference.mitsuba_scene import _write_obj
-        from tracer.imageio import _atomic_write
+        from whitted.reference import mitsuba
+        from whitted.reference.mitsuba_scene import _write_obj
+        from whitted.tracer.imageio import _atomic_write
 
         check_serialized(source, index)
         mi = mitsuba()
@@ -413,7 +414,7 @@ def dict_to_xml(tree: dict) -> str:
 
 def mitsuba_view(path: str | Path, **params) -> dict:
     """What Mitsuba itself makes of the file's sensor: to_world, horizontal fov, film size."""
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     mi = mitsuba()
     try:
@@ -440,7 +441,7 @@ def disagreements(scene, view: dict, tol: float = 1e-4) -> list[str]:
     mine = cam.to_world()
     theirs = view["to_world"]
     if cam.type == "orthographic" and cam.matrix is None:  # look_at x scale(width / 2)
-        from tracer import transform as tf
+        from whitted.tracer import transform as tf
 
         mine = mine @ tf.scale([cam.width / 2, cam.width / 2, 1])
     scale = max(1.0, float(np.abs(theirs).max()))
@@ -472,7 +473,7 @@ def render_original(source, integrator: str = "path", spp: int = 64, passes: int
     With a filter wider than a pixel, a pixel gathers more than spp samples, so this
     overestimates the variance (rule 1 of :class:`reference.compare.Noise`).
     """
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     mi = mitsuba()
     scene = (mi.load_dict(source) if isinstance(source, dict)
@@ -497,7 +498,7 @@ def render_imported(scene, seeds: int = 8):
     channels being correlated). A scene without randomness (strata centres, no
     sampled light) is rendered once; its moments then bound the strata's error.
     """
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     n = seeds if (scene.film.jitter or scene.samples_lights()) else 1
     rgb = var_y = 0.0
@@ -517,7 +518,7 @@ def agreement(test_y, test_var, ref_y, ref_var) -> dict:
     its standard error (the per-pixel variances summed, pixels being independent),
     which sees a bias too small for any one pixel.
     """
-    from reference.compare import z_test
+    from whitted.reference.compare import z_test
 
     zt = z_test(test_y[..., None].astype(np.float32), ref_y[..., None].astype(np.float32),
                 ref_var[..., None], test_var[..., None])
@@ -538,9 +539,8 @@ MEAN_Z_LIMIT = 4.0
 
 # ---------------------------------------------------------------- the report's "imported" group
 
-#: Mitsuba data scenes stored under tests/data/mitsuba_scenes/ (see its README)
-MITSUBA_DATA = (Path(__file__).resolve().parent.parent / "tests" / "data" / "mitsuba_scenes"
-                / "tests" / "scenes")
+#: Mitsuba data scenes stored under scenes/mitsuba-data/ (see its README)
+MITSUBA_DATA = MITSUBA_DATA_DIR / "tests" / "scenes"
 
 
 @dataclass
@@ -569,8 +569,8 @@ def validate_case(case: ImportedCase, workdir: Path) -> dict:
     """Import, render with the tracer, render the original on Mitsuba, and judge (agreement)."""
     import time
 
-    from reference import mitsuba
-    from tracer.scene import parse_scene
+    from whitted.reference import mitsuba
+    from whitted.tracer.scene import parse_scene
 
     t0 = time.perf_counter()
     source = case.xml

@@ -63,7 +63,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from reference.shading import Terms
+from whitted.reference.shading import Terms
 
 
 class WhittedIntegrator(mi.SamplingIntegrator):

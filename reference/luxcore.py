@@ -58,9 +58,9 @@ from pathlib import Path
 
 import numpy as np
 
-from reference.luxcore_scene import Description, config_props, describe, props_text
-from tracer.errors import UserError
-from tracer.meshio import write_ply
+from whitted.reference.luxcore_scene import Description, config_props, describe, props_text
+from whitted.tracer.errors import UserError
+from whitted.tracer.meshio import write_ply
 
 #: the pinned version (pyproject's extra)
 VERSION = "2.11.2"
@@ -202,11 +202,10 @@ def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
         # shares its offset, and the caller's seek put the child's last lines (why it
         # failed) over the first ones.
         with open(tmp / "child.log", "a") as child_log:
-            proc = subprocess.Popen([sys.executable, "-m", "reference.luxcore_runner",
+            proc = subprocess.Popen([sys.executable, "-m", "whitted.reference.luxcore_runner",
                                      *(["--nice", str(nice)] if nice else []),
                                      *map(str, jobs)], stdout=subprocess.DEVNULL,
-                                    stderr=child_log, text=True, env=dict(os.environ),
-                                    cwd=str(Path(__file__).resolve().parent.parent))
+                                    stderr=child_log, text=True, env=dict(os.environ))
         log = open(tmp / "child.log")
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

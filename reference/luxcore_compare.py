@@ -173,7 +173,7 @@ def _passes(name: str, scene, render_one, passes: int = 0) -> Side:
 
 
 def tracer_side(scene, passes: int = 0) -> Side:
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     def one(s, k):
         if not s.samples_lights():
@@ -186,7 +186,7 @@ def tracer_side(scene, passes: int = 0) -> Side:
 
 def mitsuba_side(scene, passes: int = 0) -> Side:
     """Mitsuba: the deterministic reference at the tracer's light samples of each seed."""
-    from reference.deterministic import DeterministicReference
+    from whitted.reference.deterministic import DeterministicReference
 
     return _passes("mitsuba", scene, lambda s, k: DeterministicReference(s, k).render().image,
                    passes)
@@ -226,7 +226,7 @@ def blocks_allowed(n_blocks: int, alpha: float = BLOCK_ALPHA) -> int:
 def _block_allowance(check: dict | None, image: np.ndarray) -> None:
     """Rule 3's count of blocks beyond 5 % and 3 sigma, judged against the larger of its
     2 % and :func:`blocks_allowed` (the vote's images are small)."""
-    from reference.compare import block_mean
+    from whitted.reference.compare import block_mean
 
     if check is None:
         return
@@ -238,7 +238,7 @@ def _block_allowance(check: dict | None, image: np.ndarray) -> None:
 
 def judge_pair(scene, a: Side, b: Side, regions: dict) -> dict:
     """Side a against side b by the statistical verdict, both sides' noise counted."""
-    from reference.compare import Noise, image_metrics, judge
+    from whitted.reference.compare import Noise, image_metrics, judge
 
     ref, test = (b, a) if b.variance is not None else (a, b)
     metrics = image_metrics(test.image, ref.image, with_flip=False)
@@ -327,10 +327,10 @@ def start_three(scenes: list, quick: bool = False, nice: int = 0) -> Started:
     report`` runs its comparisons and the formula-bug sweep while LuxCore renders). A
     scene that does not convert gets its one-line reason.
     """
-    from reference import luxcore
-    from reference.compare import comparable
-    from reference.luxcore_scene import describe
-    from tracer.errors import UserError
+    from whitted.reference import luxcore
+    from whitted.reference.compare import comparable
+    from whitted.reference.luxcore_scene import describe
+    from whitted.tracer.errors import UserError
 
     small = [comparable(luxcore_scene(s, QUICK_PIXELS if quick else PIXELS)) for s in scenes]
     why = []
@@ -359,8 +359,8 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
     earlier (otherwise called here). The tracer's and Mitsuba's sides render while
     LuxCore does, and ``progress(done, total)`` counts LuxCore's passes after that.
     """
-    from reference.compare import regions_of
-    from tracer.integrator import material_ids
+    from whitted.reference.compare import regions_of
+    from whitted.tracer.integrator import material_ids
 
     if started is None:
         started = start_three(scenes, quick)
@@ -383,7 +383,7 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
         if main is not None:
             m = main[i]
         else:
-            from reference.compare import compare_scene
+            from whitted.reference.compare import compare_scene
 
             c, _, _ = compare_scene(scenes[i])
             m = {"passed": c.passed, "checks": c.checks}

@@ -85,7 +85,7 @@ def main(argv: list[str]) -> int:
     by N first (``whitted report`` starts LuxCore at 19, see reference.report)."""
     import os
 
-    from reference.malloc import keep_freed_memory
+    from whitted.reference.malloc import keep_freed_memory
 
     if argv[:1] == ["--nice"]:
         os.nice(int(argv[1]))

@@ -59,13 +59,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from reference.emitters import area as area_conv
-from reference.emitters import convert as convert_light
-from reference.materials import convert as convert_material
-from reference.mitsuba_scene import paraboloid_mesh, polygon_mesh
-from tracer import transform as tf
-from tracer.errors import UserError
-from tracer.scene import (
+from whitted.reference.emitters import area as area_conv
+from whitted.reference.emitters import convert as convert_light
+from whitted.reference.materials import convert as convert_material
+from whitted.reference.mitsuba_scene import paraboloid_mesh, polygon_mesh
+from whitted.tracer import transform as tf
+from whitted.tracer.errors import UserError
+from whitted.tracer.scene import (
     Cylinder,
     Disk,
     Instance,
@@ -318,7 +318,7 @@ def describe(scene: Scene, subsamples: int = 1) -> Description:
     desc = Description(width=film.width, height=film.height, subsamples=subsamples,
                        max_depth=film.max_depth)
     if scene.tracer_only:
-        from reference.compare import comparable
+        from whitted.reference.compare import comparable
 
         scene = comparable(scene)
     p = desc.props

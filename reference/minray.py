@@ -66,8 +66,8 @@ class _Spheres:
 
 
 def _spheres(scene) -> _Spheres:
-    from tracer.materials.classic import Classic
-    from tracer.scene import Sphere
+    from whitted.tracer.materials.classic import Classic
+    from whitted.tracer.scene import Sphere
 
     rows = []
     for s in scene.shapes:
@@ -91,7 +91,7 @@ def _unit(a):
 
 def _camera_rays(scene, pixels: np.ndarray):
     """Unit directions of minray's camera rays for the given pixel indices (3 arrays)."""
-    from tracer.camera import frame
+    from whitted.tracer.camera import frame
 
     cam, film = scene.camera, scene.film
     if cam.type != "perspective":
@@ -353,9 +353,9 @@ def explain(scene, depth: int, theirs: np.ndarray, ours: np.ndarray | None = Non
     :func:`float_margin` (16 float32 ulps of the scene's extent; for a critical
     angle 16 ulps of 1): float32 cannot tell on which side it lies.
     """
-    from tracer.geometry import RAY_EPSILON_ULPS
-    from tracer.imageio import ppm_values
-    from tracer.integrator import Integrator
+    from whitted.tracer.geometry import RAY_EPSILON_ULPS
+    from whitted.tracer.imageio import ppm_values
+    from whitted.tracer.integrator import Integrator
 
     if ours is None:
         ours = ppm_values(Integrator(scene).render().image)
@@ -404,13 +404,14 @@ def main(argv: list[str] | None = None) -> int:
     import re
     from pathlib import Path
 
-    from reference.cli import SCENES_DIR
-    from tracer import load_scene
-    from tracer.imageio import ppm_values, read_ppm
-    from tracer.integrator import Integrator
+    from whitted.scenes import SCENES_DIR
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import ppm_values, read_ppm
+    from whitted.tracer.integrator import Integrator
 
     data = Path(__file__).resolve().parent.parent / "tests" / "data" / "minray"
-    ap = argparse.ArgumentParser(prog="python -m reference.minray", description=main.__doc__)
+    ap = argparse.ArgumentParser(prog="python -m whitted.reference.minray",
+                                 description=main.__doc__)
     ap.add_argument("--data", type=Path, default=data, help="folder of minray_SIZE_depthD.ppm[.gz]")
     args = ap.parse_args(argv)
     files = sorted(args.data.glob("minray_*_depth*.ppm*"),

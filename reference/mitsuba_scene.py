@@ -54,14 +54,14 @@ import numpy as np
 # Materials and lights convert in their own modules (reference/materials/,
 # reference/emitters/), through their registries; their entry points are
 # re-exported here ("X as X").
-from reference.emitters import area_tree
-from reference.emitters import emitter_tree as emitter_tree
-from reference.materials import bsdf_tree as bsdf_tree
-from reference.materials import plugin_names
-from reference.materials.textures import texture_tree as texture_tree
-from reference.mitsuba_tree import matrix as _matrix
-from tracer import transform as tf
-from tracer.scene import (
+from whitted.reference.emitters import area_tree
+from whitted.reference.emitters import emitter_tree as emitter_tree
+from whitted.reference.materials import bsdf_tree as bsdf_tree
+from whitted.reference.materials import plugin_names
+from whitted.reference.materials.textures import texture_tree as texture_tree
+from whitted.reference.mitsuba_tree import matrix as _matrix
+from whitted.tracer import transform as tf
+from whitted.tracer.scene import (
     Cube,
     Cylinder,
     Disk,
@@ -132,7 +132,7 @@ def _mesh_node(name, vertices, faces, normals=None, uvs=None) -> dict:
 
 def polygon_mesh(poly: Polygon):
     """(vertices, faces, uvs) of a polygon by ear clipping, uvs = its plane's 2D coordinates."""
-    from tracer.shapes.polygon import ear_clip, plane_frame
+    from whitted.tracer.shapes.polygon import ear_clip, plane_frame
 
     pts = np.asarray(poly.vertices, dtype=np.float64)
     origin, u, v, _ = plane_frame(pts)
@@ -433,7 +433,7 @@ def _relative_mesh_files(tree: dict, folder: Path) -> None:
 
 def _comment(text: str) -> str:
     """Text safe inside an XML comment (no "--", printable)."""
-    from tracer.errors import one_line
+    from whitted.tracer.errors import one_line
 
     return one_line(text, 200).replace("--", "- -")
 
@@ -463,7 +463,7 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
             tag = "emitter" if key.startswith("light_") else "shape"
         body += _xml(value, tag, 1, meshes, key if tag in ("shape", "emitter") else None,
                      mesh_prefix=mesh_prefix)
-    from reference.emitters import plugin_names as emitter_plugin_names
+    from whitted.reference.emitters import plugin_names as emitter_plugin_names
 
     plugins = [name for name in plugin_names() + emitter_plugin_names()
                if any(f'type="{name}"' in line for line in body)]

@@ -50,7 +50,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from tracer import faults
+from whitted.tracer import faults
 
 L1 = "lecture 1"
 L2 = "lecture 2"
@@ -342,7 +342,7 @@ faults.declare(BY_ID)
 
 def get(ids: Iterable[str]) -> list[Mutant]:
     """The catalog entries of ``ids`` (in catalog order); one-line ``UserError`` if unknown."""
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     ids = list(ids)
     unknown = [i for i in ids if i not in BY_ID]
@@ -415,7 +415,7 @@ class Unit:
 
     def judge(self, tracer_image=None) -> dict:
         """The verdict's checks for a tracer image (the tracer renders here for z-tests)."""
-        from reference.compare import image_metrics, judge, statistical_verdict
+        from whitted.reference.compare import image_metrics, judge, statistical_verdict
 
         if self.reference == "onelobe":
             return statistical_verdict(self.scene, self.ref, tracer_image,
@@ -434,7 +434,7 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
     the one-lobe reference's statistical verdict at the second opinion's size.
     Each unit's clean verdict, and which switches its render reached, are recorded.
     """
-    from reference.compare import (
+    from whitted.reference.compare import (
         choose_test,
         comparable,
         regions_of,
@@ -442,10 +442,10 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         shared_tracer_image,
         ztest_passes,
     )
-    from reference.deterministic import shares_light_samples
-    from reference.materials import has_tracer_only_models
-    from reference.render import deterministic_image, render_reference
-    from tracer.integrator import material_ids
+    from whitted.reference.deterministic import shares_light_samples
+    from whitted.reference.materials import has_tracer_only_models
+    from whitted.reference.render import deterministic_image, render_reference
+    from whitted.tracer.integrator import material_ids
 
     full = scene
     scene = comparable(scene)
@@ -561,7 +561,7 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
 
     ``between()``, when given, is called before each scene and each bug's judgement
     (``whitted report``: reference.luxcore.SharedCores.poll)."""
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     start = time.perf_counter()
     mutants = list(CATALOG if mutants is None else mutants)
@@ -610,7 +610,7 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
 
 def _judge_mutant(m: Mutant, units: list[Unit]):
     """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not."""
-    from reference.compare import shared_tracer_image  # a new render with the bug on
+    from whitted.reference.compare import shared_tracer_image  # a new render with the bug on
 
     seen_by_any = False
     for u in units:

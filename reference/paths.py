@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 DRAW_MIN_WEIGHT = 1e-3
 WANTED = ("LE", "LDE", "LSE", "LDSE")
@@ -68,13 +68,13 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
     """
     import drjit as dr
 
-    from tracer.backend import jit
-    from tracer.camera import generate_rays
-    from tracer.emitters import scene_emitters
-    from tracer.geometry import Geometry, spawn_offset
-    from tracer.integrator import SHADOW_EPSILON
-    from tracer.materials.base import ShadingPoint
-    from tracer.materials.dispatch import SceneMaterials
+    from whitted.tracer.backend import jit
+    from whitted.tracer.camera import generate_rays
+    from whitted.tracer.emitters import scene_emitters
+    from whitted.tracer.geometry import Geometry, spawn_offset
+    from whitted.tracer.integrator import SHADOW_EPSILON
+    from whitted.tracer.materials.base import ShadingPoint
+    from whitted.tracer.materials.dispatch import SceneMaterials
 
     geo = Geometry(scene)
     materials = SceneMaterials(list(scene.materials.values()))
@@ -202,7 +202,7 @@ def _scene_scale(scene) -> float:
 
 def project(scene, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Image coordinates (pixels, y down) of world points, and a mask of points in front."""
-    from tracer.camera import frame
+    from whitted.tracer.camera import frame
 
     cam = scene.camera
     r, up, f = frame(cam)
@@ -226,7 +226,7 @@ def project(scene, points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 def _clip_to_front(scene, a: np.ndarray, b: np.ndarray):
     """The part of segment a-b in front of the camera's near plane (perspective), or None."""
-    from tracer.camera import frame
+    from whitted.tracer.camera import frame
 
     cam = scene.camera
     if cam.type != "perspective":
@@ -250,7 +250,7 @@ def pick_pixels(scene, wanted=WANTED, spread: int = 0, seed: int = 0
     ``spread``: where possible, keep each pick at least that many pixels away from
     the earlier ones (so that their drawings do not overlap).
     """
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     quick = scene.with_overrides(spp=1)
     full = Integrator(quick, seed=seed).render().image.sum(-1)
@@ -293,7 +293,7 @@ def draw(scene, image: np.ndarray, trees: list[Tree], path: str, notes: list[str
     import matplotlib.pyplot as plt
     from matplotlib.lines import Line2D
 
-    from tracer.imageio import to_srgb8
+    from whitted.tracer.imageio import to_srgb8
 
     W, H = scene.film.width, scene.film.height
     ncols = 2 if extra_panel is not None else 1
@@ -352,7 +352,7 @@ def draw(scene, image: np.ndarray, trees: list[Tree], path: str, notes: list[str
 
 def ldde_lsde_panel(scene, spp: int = 64, seed: int = 0):
     """(luminance image, title): Mitsuba path (3 segments) minus Whitted (3 segments)."""
-    from reference.render import render_reference
+    from whitted.reference.render import render_reference
 
     s = scene.with_overrides(max_depth=3, spp=spp)
     path = render_reference(s, "path", seed=seed, jitter=True).image
@@ -374,9 +374,9 @@ class _Hits:
     def __init__(self, geo, materials, o: np.ndarray, d: np.ndarray):
         import drjit as dr
 
-        from tracer.backend import jit
-        from tracer.geometry import spawn_offset
-        from tracer.materials.base import ShadingPoint
+        from whitted.tracer.backend import jit
+        from whitted.tracer.geometry import spawn_offset
+        from whitted.tracer.materials.base import ShadingPoint
 
         O = jit.Array3f(*o.T.astype(np.float32))
         D = jit.Array3f(*d.T.astype(np.float32))
@@ -401,7 +401,7 @@ class _Hits:
 
     def f(self, wi: np.ndarray) -> np.ndarray:
         """RGB f(wo, wi) of the smooth part, for directions wi (rows)."""
-        from tracer.backend import jit
+        from whitted.tracer.backend import jit
 
         return np.asarray(self.closure.eval(jit.Array3f(*wi.T.astype(np.float32)))).T
 
@@ -418,7 +418,7 @@ class _Hits:
 
     def lobes(self):
         """(direction, RGB weight) of each delta lobe, as rows."""
-        from tracer.backend import jit
+        from whitted.tracer.backend import jit
 
         ones = jit.Array3f(*np.ones((3, len(self.valid)), np.float32))
         return [(np.asarray(s.d).T.astype(np.float64), np.asarray(s.weight).T)
@@ -443,12 +443,12 @@ def example_paths(scene, exprs=("LDDE", "LSDE"), candidates: int = 400,
     """
     import drjit as dr
 
-    from tracer.backend import jit
-    from tracer.camera import generate_rays
-    from tracer.emitters import scene_emitters
-    from tracer.geometry import Geometry
-    from tracer.integrator import SHADOW_EPSILON
-    from tracer.materials.dispatch import SceneMaterials
+    from whitted.tracer.backend import jit
+    from whitted.tracer.camera import generate_rays
+    from whitted.tracer.emitters import scene_emitters
+    from whitted.tracer.geometry import Geometry
+    from whitted.tracer.integrator import SHADOW_EPSILON
+    from whitted.tracer.materials.dispatch import SceneMaterials
 
     geo = Geometry(scene)
     materials = SceneMaterials(list(scene.materials.values()))
@@ -563,8 +563,8 @@ def _eval_at(eye: _Hits, keep: np.ndarray, wd: np.ndarray, idx: np.ndarray) -> n
     """f(x) (RGB rows) of the eye hits ``keep`` for directions ``wd`` (one per row, x = idx)."""
     import drjit as dr
 
-    from tracer.backend import jit
-    from tracer.materials.base import ShadingPoint
+    from whitted.tracer.backend import jit
+    from whitted.tracer.materials.base import ShadingPoint
 
     lanes = np.nonzero(keep)[0][idx]
     take = jit.UInt32(lanes.astype(np.uint32))
@@ -574,7 +574,7 @@ def _eval_at(eye: _Hits, keep: np.ndarray, wd: np.ndarray, idx: np.ndarray) -> n
     parts = [(bsdf, dr.gather(type(mask), mask, take),
               None if prm is None else _gather_tree(prm, take))
              for bsdf, mask, prm in eye.closure.parts]
-    from tracer.materials.dispatch import Closure
+    from whitted.tracer.materials.dispatch import Closure
 
     closure = Closure(parts, sub, dr.gather(jit.Bool, jit.Bool(eye.valid), take))
     return np.asarray(closure.eval(jit.Array3f(*wd.T.astype(np.float32)))).T

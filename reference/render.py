@@ -7,10 +7,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from reference import mitsuba
-from reference.mitsuba_scene import load
-from reference.shared import reused
-from tracer.scene import Scene
+from whitted.reference import mitsuba
+from whitted.reference.mitsuba_scene import load
+from whitted.reference.shared import reused
+from whitted.tracer.scene import Scene
 
 INTEGRATORS = ("whitted", "direct", "path", "deterministic")
 
@@ -21,7 +21,7 @@ def deterministic_image(scene: Scene, seed: int = 0, models: bool = False,
     the harness's own models of the scene's tracer-only parts), shared as
     :mod:`reference.shared` says. ``renderer``: the DeterministicReference of these
     arguments to render it with, where the caller renders with it again."""
-    from reference.deterministic import DeterministicReference
+    from whitted.reference.deterministic import DeterministicReference
 
     def make():
         ref = renderer or DeterministicReference(scene, seed, models=models)
@@ -83,7 +83,7 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
 def _render_reference(scene: Scene, integrator: str, seed: int, moments: bool, jitter: bool,
                       passes: int) -> ReferenceResult:
     if integrator == "deterministic":
-        from reference.deterministic import DeterministicReference
+        from whitted.reference.deterministic import DeterministicReference
 
         ref = DeterministicReference(scene, seed)
         start = time.perf_counter()
@@ -94,8 +94,8 @@ def _render_reference(scene: Scene, integrator: str, seed: int, moments: bool, j
                                seconds_total=first + warm.seconds)
     if integrator not in INTEGRATORS:
         raise ValueError(f"unknown reference integrator {integrator!r}")
-    from tracer.limits import check_render
-    from tracer.sampling import seed32
+    from whitted.tracer.limits import check_render
+    from whitted.tracer.sampling import seed32
 
     check_render(scene, moments=moments, mitsuba=True)
     seed = seed32(seed)

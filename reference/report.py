@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from reference.compare import write_json
+from whitted.reference.compare import write_json
 
 QUICK_WIDTH = 96
 QUICK_SPP = 16
@@ -73,7 +73,7 @@ class Report:
 def versions() -> dict:
     from importlib import metadata
 
-    from tracer import backend, llvm
+    from whitted.tracer import backend, llvm
 
     def v(name):
         try:
@@ -102,7 +102,7 @@ def machine() -> dict:
     except OSError:
         pass
     gpu = None
-    from tracer import backend
+    from whitted.tracer import backend
 
     if backend.name() == "cuda":
         try:
@@ -162,7 +162,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     goes on without the vote, and says why in one line on stderr and as "not
     available" in its three files (:func:`not_available`).
     """
-    from reference.shared import shared
+    from whitted.reference.shared import shared
 
     with shared():   # the sweep reuses the comparisons' references and clean renders
         return _build_report(outdir, scene_paths, quick, log, fresnel, reference,
@@ -171,7 +171,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
 
 def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_opinion,
                   mutants, luxcore, imported) -> Report:
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     start = time.perf_counter()
     out = Path(outdir)
@@ -184,8 +184,8 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
     total = len(scenes) + (1 if fresnel else 0)
     started = None
     if luxcore:
-        from reference import luxcore as lux
-        from reference.luxcore_compare import compare_three, start_three
+        from whitted.reference import luxcore as lux
+        from whitted.reference.luxcore_compare import compare_three, start_three
 
         t_lux = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
@@ -199,7 +199,7 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
             log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while "
                 "the report goes on")
     try:
-        from reference.luxcore import SharedCores
+        from whitted.reference.luxcore import SharedCores
 
         _compare_scenes(report, scenes, work, quick, log, reference, second_opinion, total)
         # Dr.Jit on one thread while LuxCore's child renders beside the untimed sweep
@@ -225,7 +225,7 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
         log(f"LuxCore: {sum(t.compared for t in threes)} scenes compared "
             f"({time.perf_counter() - t_lux:.1f} s since it started)")
     if imported:
-        from reference.importer import imported_cases, validate_case
+        from whitted.reference.importer import imported_cases, validate_case
 
         for case in imported_cases(quick):
             t0 = time.perf_counter()
@@ -256,7 +256,7 @@ def not_available(report: Report, part: str, error: BaseException) -> None:
     it stays the tracer's against Mitsuba."""
     import sys
 
-    from tracer.errors import UserError, one_line
+    from whitted.tracer.errors import UserError, one_line
 
     why = str(error) if isinstance(error, UserError) else (
         f"{type(error).__name__}: {error}" if str(error) else type(error).__name__)
@@ -276,7 +276,7 @@ def _not_available_lines(report: Report) -> list[str]:
 def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
                     total) -> None:
     """Each scene's comparison with Mitsuba, its images and light paths, into ``report``."""
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     for i, scene in enumerate(scenes, 1):
         if quick:
@@ -300,7 +300,7 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
                        between) -> None:
     """The report's Fresnel curves and formula-bug sweep, while LuxCore's child renders;
     ``between()`` is called between pieces of the sweep's work."""
-    from reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
+    from whitted.reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
 
     if fresnel:
         t0 = time.perf_counter()
@@ -313,7 +313,7 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
         log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
             f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
     if mutants:
-        from reference import mutants as mutant_sweep
+        from whitted.reference import mutants as mutant_sweep
 
         t0 = time.perf_counter()
         log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
@@ -337,8 +337,8 @@ def light_paths(scene) -> tuple[dict, dict]:
     The four expressions partition every path a Whitted tracer makes, so the
     parts sum to the full render; the largest deviation of that sum is kept.
     """
-    from reference.compare import shared_tracer_image
-    from tracer.integrator import Integrator
+    from whitted.reference.compare import shared_tracer_image
+    from whitted.tracer.integrator import Integrator
 
     full = shared_tracer_image(scene)   # the comparison's render, where it is the same scene
     parts = {e: Integrator(scene, lpe=e).render().image for e in PARTITION}
@@ -366,7 +366,7 @@ def scene_entry(c) -> dict:
 def _png_bytes(image: np.ndarray, scale: int = 1) -> bytes:
     from PIL import Image
 
-    from tracer.imageio import to_srgb8
+    from whitted.tracer.imageio import to_srgb8
 
     img = Image.fromarray(to_srgb8(image), "RGB")
     if scale > 1:
@@ -378,14 +378,14 @@ def _png_bytes(image: np.ndarray, scale: int = 1) -> bytes:
 
 def _scene_viewer(tracer_img, ref_img) -> str:
     """The tev-like viewer of the two renders (reference.viewer)."""
-    from reference.viewer import viewer
+    from whitted.reference.viewer import viewer
 
     return viewer([("tracer", tracer_img), ("Mitsuba", ref_img)],
                   "hover for both renders' values; click to flip; wheel to zoom")
 
 
 def _viewer_assets() -> str:
-    from reference.viewer import assets
+    from whitted.reference.viewer import assets
 
     return assets()
 

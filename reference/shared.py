@@ -21,7 +21,7 @@ import pickle
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 
-from tracer import faults
+from whitted.tracer import faults
 
 #: Inside :func:`shared`: key -> (result, the switches its computation asked about).
 _kept: dict | None = None

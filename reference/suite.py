@@ -126,7 +126,7 @@ IMAGE_EXTENSIONS = (".exr", ".pfm", ".hdr", ".png", ".ppm")
 
 def scene_kinds(scene) -> dict:
     """The kinds and features a scene uses, read from the scene model."""
-    from tracer import emitters, materials
+    from whitted.tracer import emitters, materials
 
     mats = sorted({materials.type_of(m) for m in scene.used_materials()})
     lights = sorted({emitters.type_of(light) for light in scene.lights}
@@ -164,7 +164,7 @@ def select(paths: list[Path], pattern: str | None) -> list[Path]:
 
 def _copy_meshes(scene, scene_path: Path, dest: Path) -> list[Path]:
     """Copy the mesh files a scene reads to the same relative place beside its copy."""
-    from tracer.scene import Mesh
+    from whitted.tracer.scene import Mesh
 
     out = []
     for s in scene.all_shapes():
@@ -183,7 +183,7 @@ def _copy_meshes(scene, scene_path: Path, dest: Path) -> list[Path]:
 def write_reference(path: Path, image: np.ndarray, variance: np.ndarray | None,
                     spread: np.ndarray | None, quadrature: np.ndarray | None = None) -> None:
     """A reference EXR: RGB, and the ``variance``, ``spread`` and ``quadrature`` layers."""
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     layers = {}
     for name, a in (("variance", variance), ("spread", spread), ("quadrature", quadrature)):
@@ -199,7 +199,7 @@ MAX_REFERENCE_BYTES = 1 << 30
 
 def _regular_file(path: Path, what: str, limit: int) -> os.stat_result:
     """``path``'s status if it is a regular file of at most ``limit`` bytes (no FIFO, device)."""
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     try:
         st = os.stat(path)
@@ -218,9 +218,9 @@ def read_reference(path: Path, name: str):
     R, G, B must be finite; the ``variance``, ``spread`` and ``quadrature``
     layers, where present, finite and not negative, all of one size.
     """
-    from reference.check import Reference
-    from tracer.errors import UserError, one_line
-    from tracer.imageio import read_exr_channels
+    from whitted.reference.check import Reference
+    from whitted.tracer.errors import UserError, one_line
+    from whitted.tracer.imageio import read_exr_channels
 
     _regular_file(path, "a reference EXR", MAX_REFERENCE_BYTES)
     try:
@@ -263,12 +263,12 @@ def read_reference(path: Path, name: str):
 
 def export(outdir: Path, scene_paths: list[Path], log=print) -> dict:
     """Write the suite (module docstring); return the manifest."""
-    from reference.check import tracer_reference
-    from reference.compare import write_json
-    from reference.mitsuba_scene import write_xml
-    from reference.suspects import light_path_images
-    from tracer import load_scene
-    from tracer.imageio import write_png
+    from whitted.reference.check import tracer_reference
+    from whitted.reference.compare import write_json
+    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.suspects import light_path_images
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import write_png
 
     scenes = [(p, load_scene(p)) for p in scene_paths]   # all validated first
     for sub in ("scenes", "mitsuba", "references"):
@@ -352,7 +352,7 @@ def safe_member(root: Path, relpath, what: str) -> Path:
     (the manifest entry), so that no read or write can leave the folder.
     Returns the resolved path: use it, not the joined one.
     """
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     shown = repr(relpath) if not isinstance(relpath, str) or len(relpath) <= 80 \
         else repr(relpath[:80] + "...")
@@ -386,7 +386,7 @@ def read_bounded(path: Path, limit: int, what: str) -> bytes:
     Checked with stat before opening, opened without blocking (a FIFO swapped in
     meanwhile does not hang) and checked again on the open file.
     """
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     _regular_file(path, what, limit)
     try:
@@ -427,7 +427,7 @@ def validate_manifest(data, mf: Path, root: Path) -> list[dict]:
     ``reference``, ``date``) are checked when present. Every path is checked by
     :func:`safe_member`. Errors name the entry: ``scenes[3] (glass_sphere) files.scene``.
     """
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     def bad(where: str, expected: str, v) -> None:
         raise UserError(f"{mf}: {where}: expected {expected}, got {_kind(v)}; not a whitted "
@@ -507,7 +507,7 @@ def validate_manifest(data, mf: Path, root: Path) -> list[dict]:
 
 def read_manifest(suite_dir: Path) -> dict:
     """A suite folder's ``manifest.json``, read and validated (module docstring)."""
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     mf = suite_dir / "manifest.json"
     if not os.path.lexists(mf):
@@ -524,7 +524,7 @@ def read_manifest(suite_dir: Path) -> dict:
         raise UserError(f"{mf}: nested too deeply (a manifest needs "
                         f"{MAX_MANIFEST_NESTING} levels at most)") from None
     except ValueError as e:   # UnicodeDecodeError and JSONDecodeError among them
-        from tracer.errors import one_line
+        from whitted.tracer.errors import one_line
 
         raise UserError(f"{mf}: not a whitted suite manifest (not JSON: "
                         f"{one_line(str(e), 120)})") from None
@@ -557,7 +557,7 @@ class Suite:
 def load_suite(suite_dir: Path | None, pattern: str | None = None) -> Suite:
     """The scenes of a suite folder (validated, paths resolved) or the built-in scenes."""
     if suite_dir is None:
-        from reference.cli import builtin_scenes
+        from whitted.scenes import builtin_scenes
 
         return Suite(None, None, [SuiteEntry(p.stem, p)
                                   for p in select(builtin_scenes(), pattern)])
@@ -619,7 +619,7 @@ def find_image(folder: Path, name: str) -> tuple[Path | None, str]:
 
 def _stored_reference(entry: SuiteEntry, scene):
     """The entry's stored reference, checked against the scene's film (one-line errors)."""
-    from tracer.errors import UserError
+    from whitted.tracer.errors import UserError
 
     ref = read_reference(entry.reference_exr, "stored reference")
     w, h = scene.film.width, scene.film.height
@@ -637,10 +637,10 @@ def grade(images: Path, suite: Suite | Path | None, pattern: str | None = None,
     The scenes and the stored references are all read and checked before any
     rendering: a bad suite is bad input (one line), not a failing scene.
     """
-    from reference.check import check_image
-    from reference.user_image import read_user_image
-    from tracer import load_scene
-    from tracer.errors import UserError
+    from whitted.reference.check import check_image
+    from whitted.reference.user_image import read_user_image
+    from whitted.tracer import load_scene
+    from whitted.tracer.errors import UserError
 
     if not isinstance(suite, Suite):
         suite = load_suite(suite, pattern)
@@ -685,7 +685,7 @@ OUTPUT_NAMES = ("index.html", "suite.json")
 
 def write_outputs(result: SuiteResult, outdir: Path) -> list[Path]:
     """``suite.json`` and ``index.html`` in ``outdir`` (which exists)."""
-    from reference.compare import write_json
+    from whitted.reference.compare import write_json
 
     write_json(outdir / "suite.json", result.to_json())
     (outdir / "index.html").write_text(suite_page(result))
@@ -710,8 +710,8 @@ class PendingFiles:
         return self
 
     def path_for(self, target: Path) -> Path:
-        from tracer.errors import UserError
-        from tracer.imageio import TEMP_PREFIX, file_mode
+        from whitted.tracer.errors import UserError
+        from whitted.tracer.imageio import TEMP_PREFIX, file_mode
 
         try:
             fd, tmp = tempfile.mkstemp(prefix=TEMP_PREFIX, suffix=target.suffix,
@@ -724,7 +724,7 @@ class PendingFiles:
         return Path(tmp)
 
     def commit(self) -> None:
-        from tracer.errors import UserError
+        from whitted.tracer.errors import UserError
 
         while self.moves:
             tmp, target = self.moves[0]
@@ -745,8 +745,8 @@ class PendingFiles:
 
 def check_update_targets(suite: Suite) -> None:
     """Refuse, before any rendering, an ``--update`` that could not write all its files."""
-    from tracer.errors import UserError
-    from tracer.imageio import check_output_path
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.imageio import check_output_path
 
     if suite.folder is None:
         raise UserError("--update rewrites a suite's stored references: give --suite DIR")
@@ -764,9 +764,9 @@ def stage_references(result: SuiteResult, suite: Suite, pending: PendingFiles) -
     docstring). Returns the reference EXRs that :meth:`PendingFiles.commit`
     will replace.
     """
-    from reference.compare import write_json
-    from tracer.errors import UserError
-    from tracer.imageio import write_png
+    from whitted.reference.compare import write_json
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.imageio import write_png
 
     if not result.passed:
         raise ValueError("refusing to update the references of a run that fails")
@@ -827,8 +827,8 @@ def suite_page(result: SuiteResult) -> str:
     """One self-contained HTML page: the table, then each scene with its viewer."""
     import html
 
-    from reference.check import PAGE_CSS, _verdict_html, describe_method, result_rows
-    from reference.viewer import assets, viewer
+    from whitted.reference.check import PAGE_CSS, _verdict_html, describe_method, result_rows
+    from whitted.reference.viewer import assets, viewer
 
     esc = html.escape
     parts = ["<!doctype html><html lang='en'><head><meta charset='utf-8'>",

@@ -101,7 +101,7 @@ class PathFit:
 
 def light_path_images(scene, seed: int = 0) -> dict[str, np.ndarray]:
     """The tracer's image of each path of :data:`PATHS` (paths without light left out)."""
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     out = {}
     for expr in PATHS:
@@ -167,7 +167,7 @@ def material_split(diff: np.ndarray, var: np.ndarray, reference: np.ndarray,
                    material_ids: np.ndarray, material_names: list[str],
                    use: np.ndarray | None = None) -> list[MaterialPart]:
     """The difference beyond noise over each first-hit material, the background, the emitters."""
-    from reference.compare import regions_of
+    from whitted.reference.compare import regions_of
 
     d = np.asarray(diff, dtype=np.float64).sum(-1)
     r = np.abs(np.asarray(reference, dtype=np.float64)).sum(-1)
@@ -324,8 +324,8 @@ def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
     """
     u = np.asarray(user_image, dtype=np.float64)
     if reference is None or variance is None:
-        from reference.check import judge_image, tracer_reference
-        from reference.user_image import UserImage
+        from whitted.reference.check import judge_image, tracer_reference
+        from whitted.reference.user_image import UserImage
 
         ref = tracer_reference(scene)
         if reference is None:
@@ -350,8 +350,8 @@ def reached_faults(scene) -> frozenset[str]:
     so a tiny film at the scene's strata asks the same questions as the full
     one; a switch never asked about cannot change the image.
     """
-    from tracer import faults
-    from tracer.integrator import Integrator
+    from whitted.tracer import faults
+    from whitted.tracer.integrator import Integrator
 
     small = scene.with_overrides(size=(min(8, scene.film.width), min(6, scene.film.height)))
     with faults.recording() as asked:
@@ -363,7 +363,7 @@ def cache_dir() -> Path:
     """Where the scenes' images with a bug are kept: ``WHITTED_SUSPECTS_CACHE``, else
     ``$XDG_CACHE_HOME/whitted/suspects`` (``~/.cache/whitted/suspects``); used only as
     :mod:`tracer.cache` allows (this user's, 0700, no one else may write)."""
-    from tracer import cache
+    from whitted.tracer import cache
 
     if os.environ.get("WHITTED_SUSPECTS_CACHE"):
         return Path(os.environ["WHITTED_SUSPECTS_CACHE"])
@@ -377,7 +377,7 @@ def _tracer_digest() -> str:
     """A hash of the tracer's sources: a cached image is never reused by another tracer."""
     global _TRACER_DIGEST
     if _TRACER_DIGEST is None:
-        import tracer
+        from whitted import tracer
 
         h = hashlib.blake2b(digest_size=16)
         root = Path(tracer.__file__).parent
@@ -409,10 +409,10 @@ def mutated_image(scene, fault_id: str | None, seed: int = 0, cache: Path | None
     finite everywhere (:func:`_cached_image`); anything else is rendered again
     and overwritten.
     """
-    from reference import mutants  # noqa: F401  (declares the catalog's ids)
-    from tracer import cache as tcache
-    from tracer import faults
-    from tracer.integrator import Integrator
+    from whitted.reference import mutants  # noqa: F401  (declares the catalog's ids)
+    from whitted.tracer import cache as tcache
+    from whitted.tracer import faults
+    from whitted.tracer.integrator import Integrator
 
     top = cache or cache_dir()
     folder = top / _scene_key(scene, seed)
@@ -440,7 +440,7 @@ def _cached_image(path: Path, shape: tuple[int, int, int]) -> np.ndarray | None:
     """
     from numpy.lib import format as npy
 
-    from tracer import cache as tcache
+    from whitted.tracer import cache as tcache
 
     f = tcache.open_entry(path)
     if f is None:
@@ -469,7 +469,7 @@ def _cached_image(path: Path, shape: tuple[int, int, int]) -> np.ndarray | None:
 
 def catalog_suspects(scene, seed: int = 0, ids: list[str] | None = None) -> list[Suspect]:
     """The catalog's bugs (:mod:`reference.mutants`) that the scene reaches, as suspects."""
-    from reference import mutants
+    from whitted.reference import mutants
 
     reached = reached_faults(scene)
     entries = mutants.CATALOG if ids is None else mutants.get(ids)
@@ -515,7 +515,7 @@ def rank_catalog(scene, diff: np.ndarray, var: np.ndarray, use: np.ndarray | Non
     """
     import time
 
-    from reference import mutants
+    from whitted.reference import mutants
 
     start = time.perf_counter()
     reached = reached_faults(scene)

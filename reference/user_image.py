@@ -54,8 +54,8 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.errors import UserError
-from tracer.imageheader import FORMAT_NAMES
+from whitted.tracer.errors import UserError
+from whitted.tracer.imageheader import FORMAT_NAMES
 
 ENCODINGS = ("srgb", "linear", "minray")
 EIGHT_BIT = ("png", "ppm")
@@ -135,7 +135,7 @@ def read_user_image(path: str | Path, encoding: str | None = None) -> UserImage:
     (PNG, PPM) encodes light; default ``srgb``. It is refused for formats that
     store linear floating-point values.
     """
-    from tracer.imageheader import check_image_file, library_message
+    from whitted.tracer.imageheader import check_image_file, library_message
 
     p = Path(path)
     if encoding is not None and encoding not in ENCODINGS:
@@ -179,7 +179,7 @@ def _rgb(a: np.ndarray, notes: list[str], what: str) -> np.ndarray:
 
 
 def _read_exr(p: Path, fmt: str, encoding: str) -> UserImage:
-    from tracer.imageio import read_exr_channels
+    from whitted.tracer.imageio import read_exr_channels
 
     channels, header = read_exr_channels(p)
     data, display = header.get("dataWindow"), header.get("displayWindow")
@@ -229,8 +229,8 @@ def _bitmap_array(p: Path, fmt: str):
     import shutil
     import tempfile
 
-    from reference import mitsuba
-    from tracer.imageheader import ImageError, captured_stderr, library_message
+    from whitted.reference import mitsuba
+    from whitted.tracer.imageheader import ImageError, captured_stderr, library_message
 
     mi = mitsuba()
     error = None
@@ -296,7 +296,7 @@ def _read_png(p: Path, fmt: str, encoding: str) -> UserImage:
 
 
 def _read_ppm(p: Path, fmt: str, encoding: str) -> UserImage:
-    from tracer.imageio import read_ppm_maxval
+    from whitted.tracer.imageio import read_ppm_maxval
 
     codes, maxval = read_ppm_maxval(p)
     bits = "16-bit" if maxval > 255 else "8-bit"

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-import tracer  # noqa: F401  (must precede drjit)
+from whitted import tracer  # noqa: F401  (must precede drjit)
 
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
@@ -46,7 +46,7 @@ def pytest_unconfigure(config):
 @pytest.fixture(scope="session")
 def jit():
     """The array types of the selected backend (drjit.llvm or drjit.cuda)."""
-    from tracer import backend
+    from whitted.tracer import backend
 
     backend.use()
     return backend.jit
@@ -55,7 +55,7 @@ def jit():
 @pytest.fixture(scope="session")
 def mi():
     """Mitsuba with the variant of the selected backend and our plugins registered."""
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     return mitsuba()
 
@@ -65,7 +65,7 @@ def run_cli(*args, env=None, cwd=None, timeout=600):
     full_env = dict(os.environ)
     if env:
         full_env.update(env)
-    return subprocess.run([sys.executable, "-m", "reference.cli", *map(str, args)],
+    return subprocess.run([sys.executable, "-m", "whitted.reference.cli", *map(str, args)],
                           capture_output=True, text=True, env=full_env, cwd=cwd or ROOT,
                           timeout=timeout)
 

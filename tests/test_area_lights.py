@@ -10,10 +10,10 @@ import math
 import numpy as np
 import pytest
 
-from tracer import lights
-from tracer.emitters.area import Emitter as AreaLight
-from tracer.scene import AreaEmitter, Rectangle, Sphere
-from tracer.transform import rotate, scale, translate
+from whitted.tracer import lights
+from whitted.tracer.emitters.area import Emitter as AreaLight
+from whitted.tracer.scene import AreaEmitter, Rectangle, Sphere
+from whitted.tracer.transform import rotate, scale, translate
 
 N = 1 << 20
 
@@ -114,9 +114,9 @@ def test_flat_area_light_never_shadows_its_own_sample_at_grazing_angles(jit):
     # light's plane short of the sample, on the light itself, and the light would shadow
     # its own light (the tracer did, before shadow_ray aimed at the sample). Aimed at the
     # sample from the offset origin, as Mitsuba's spawn_ray_to does, it never is.
-    from tracer.geometry import Geometry, spawn_offset
-    from tracer.integrator import SHADOW_EPSILON
-    from tracer.scene import parse_scene
+    from whitted.tracer.geometry import Geometry, spawn_offset
+    from whitted.tracer.integrator import SHADOW_EPSILON
+    from whitted.tracer.scene import parse_scene
 
     scene = parse_scene({
         "camera": {"origin": [0, 1, 5], "target": [0, 0, 0]},

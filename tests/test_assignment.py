@@ -4,10 +4,10 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from reference.depth_sweep import parse_depths
-from reference.paths import pick_pixels, project, ray_trees
-from tracer import load_scene
-from tracer.errors import UserError
+from whitted.reference.depth_sweep import parse_depths
+from whitted.reference.paths import pick_pixels, project, ray_trees
+from whitted.tracer import load_scene
+from whitted.tracer.errors import UserError
 
 
 def test_the_physically_based_version_is_his_five_spheres_seen_through_25_degrees():
@@ -21,7 +21,7 @@ def test_the_physically_based_version_is_his_five_spheres_seen_through_25_degree
 
 
 def test_heckbert_minray_is_his_five_spheres_in_his_own_model():
-    from tracer.materials.classic import Classic
+    from whitted.tracer.materials.classic import Classic
 
     s = load_scene(SCENES / "heckbert_minray.toml")
     assert (s.film.width, s.film.height, s.film.spp, s.film.depth) == (32, 32, 1, 3)
@@ -112,7 +112,7 @@ def test_paths_command_draws_a_figure(tmp_path):
 def test_ray_trees_reach_a_disk_light():
     import tomllib
 
-    from tracer.scene import parse_scene
+    from whitted.tracer.scene import parse_scene
 
     text = ("[film]\nwidth = 40\nheight = 30\nspp = 1\nmax_depth = 2\n"
             "[camera]\norigin = [0, 1, 4]\ntarget = [0, 0.3, 0]\n"
@@ -138,9 +138,9 @@ ASSIGNMENT_FILES = {"heckbert_depth1.png", "heckbert_depth2.png", "heckbert_dept
 def test_the_assignment_command_writes_the_assignments_files(tmp_path):
     from PIL import Image
 
-    from reference.minray import ray_count
-    from tracer.imageio import ppm_values
-    from tracer.integrator import Integrator
+    from whitted.reference.minray import ray_count
+    from whitted.tracer.imageio import ppm_values
+    from whitted.tracer.integrator import Integrator
 
     out = tmp_path / "a1"
     r = run_cli("assignment", "-o", out, "--size", "32", "--depths", "1-5,20", "--repeat", "1")
@@ -177,10 +177,10 @@ def test_the_assignment_command_writes_the_assignments_files(tmp_path):
 
 
 def test_the_light_paths_figure_names_all_six_paths(tmp_path):
-    from reference.assignment import light_paths, scene_at
-    from reference.paths import example_paths, pick_pixels
-    from tracer.imageio import ppm_values
-    from tracer.integrator import Integrator
+    from whitted.reference.assignment import light_paths, scene_at
+    from whitted.reference.paths import example_paths, pick_pixels
+    from whitted.tracer.imageio import ppm_values
+    from whitted.tracer.integrator import Integrator
 
     scene = scene_at(64, 5)
     picked = pick_pixels(scene, spread=5)

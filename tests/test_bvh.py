@@ -14,8 +14,8 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from tracer.bvh import BVH, INVALID, build_bvh, sah_cost
-from tracer.shapes import triangle as tri_f
+from whitted.tracer.bvh import BVH, INVALID, build_bvh, sah_cost
+from whitted.tracer.shapes import triangle as tri_f
 
 #: Relative tolerance on t: a few float32 roundings (2^-24 each) that may differ
 #: between the two kernels, times the condition of the solve for non-grazing hits.
@@ -230,7 +230,7 @@ def test_the_tree_does_not_depend_on_the_chunk_size(monkeypatch, chunk):
     fewer bins into fewer bins, which the chunked path does not): a CHUNK chosen for
     speed changes nothing else. 12,800 triangles: one lane a node at the default, many
     chunks at 32 or 100."""
-    import tracer.bvh as bvh_module
+    import whitted.tracer.bvh as bvh_module
 
     p, f = torus(80, 80)
     p0, p1, p2 = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
@@ -390,9 +390,9 @@ def test_a_scenes_occlusion_agrees_with_its_closest_hit(jit):
     """Geometry.occluded, where a mesh stops at its first hit and later blocks test only
     the rays not yet blocked, answers as the closest hit does: two meshes and a floor
     (mesh_knot), rays from points all over the scene, active lanes or not."""
-    from reference.cli import resolve_scene
-    from tracer import load_scene
-    from tracer.geometry import Geometry
+    from whitted.reference.cli import resolve_scene
+    from whitted.tracer import load_scene
+    from whitted.tracer.geometry import Geometry
 
     geo = Geometry(load_scene(resolve_scene("mesh_knot")))
     assert sum(b.any_hit for b in geo.blocks) == 2 and len(geo.blocks) == 3
@@ -413,7 +413,7 @@ def test_the_same_triangles_share_a_tree_and_different_ones_do_not(jit):
     """shared_bvh: a mesh built again (the formula-bug sweep builds a scene once per bug)
     gets the tree already built for the same corners; a mesh that differs in one
     coordinate gets a tree of its own, which finds that triangle where it now is."""
-    from tracer.bvh import shared_bvh
+    from whitted.tracer.bvh import shared_bvh
 
     p0, p1, p2 = soup(np.random.default_rng(11), 500)
     first = shared_bvh(p0, p1, p2)

@@ -21,8 +21,8 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCENES
 
-from reference import suspects
-from tracer import llvm
+from whitted.reference import suspects
+from whitted.tracer import llvm
 
 SIZE = (4, 3)
 
@@ -54,7 +54,7 @@ def probes(monkeypatch):
 
 @pytest.fixture(scope="module")
 def scene():
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     return load_scene(SCENES / "sphere_point.toml").with_overrides(size=SIZE)
 

@@ -5,8 +5,8 @@ import math
 import numpy as np
 import pytest
 
-from tracer.camera import frame, generate_rays
-from tracer.scene import Camera
+from whitted.tracer.camera import frame, generate_rays
+from whitted.tracer.scene import Camera
 
 
 def _rays(jit, cam, w, h, xs, ys):
@@ -58,8 +58,8 @@ def test_orthographic_rays_are_parallel(jit):
 
 @pytest.mark.parametrize("kind", ["perspective", "orthographic"])
 def test_camera_rays_match_mitsubas_sensor(jit, mi, kind):
-    from reference.mitsuba_scene import sensor_tree, to_dict
-    from tracer.scene import Film, Scene
+    from whitted.reference.mitsuba_scene import sensor_tree, to_dict
+    from whitted.tracer.scene import Film, Scene
 
     cam = Camera(kind, (0.3, 1.5, 4), (0.1, 0.4, 0), (0, 1, 0), fov=50, width=3)
     w, h = 40, 30

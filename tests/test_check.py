@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from reference.check import (
+from whitted.reference.check import (
     Thresholds,
     judge_image,
     local_variance,
     rounding_bias_bound,
     tracer_reference,
 )
-from reference.user_image import UserImage, code_steps, decode, read_user_image
+from whitted.reference.user_image import UserImage, code_steps, decode, read_user_image
 
 #: Glass and a mirror before emitting panels: Mitsuba's path tracer converges to Whitted's
 #: image there.
@@ -32,7 +32,7 @@ def _user(image, **kw) -> UserImage:
 
 
 def _scene(name, size=None):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     s = load_scene(SCENES / f"{name}.toml")
     return s if size is None else s.with_overrides(size=size)
@@ -40,8 +40,8 @@ def _scene(name, size=None):
 
 def _mitsuba_path(scene, seed, spp=64):
     """Mitsuba's own path tracer on the converted scene, samples jittered in their strata."""
-    from reference import mitsuba
-    from reference.mitsuba_scene import load
+    from whitted.reference import mitsuba
+    from whitted.reference.mitsuba_scene import load
 
     mi = mitsuba()
     ms = load(scene, mi, "path", jitter=True)
@@ -49,7 +49,7 @@ def _mitsuba_path(scene, seed, spp=64):
 
 
 def _judge(scene, image, ref=None, **kw):
-    from tracer.integrator import material_ids
+    from whitted.tracer.integrator import material_ids
 
     ref = ref or tracer_reference(scene)
     return judge_image(_user(image) if isinstance(image, np.ndarray) else image, ref,
@@ -68,8 +68,8 @@ def _linear_test_image():
 
 
 def test_exr_pfm_and_hdr_read_back_what_was_written(tmp_path):
-    from reference import mitsuba
-    from tracer.imageio import write_exr
+    from whitted.reference import mitsuba
+    from whitted.tracer.imageio import write_exr
 
     img = _linear_test_image().astype(np.float32)
     write_exr(tmp_path / "a.exr", img)
@@ -127,7 +127,7 @@ def test_half_exr_records_its_rounding_step(tmp_path):
 def test_each_8bit_encoding_round_trips_within_half_a_step(tmp_path, encoding):
     from PIL import Image
 
-    from tracer.imageio import to_srgb8, write_ppm
+    from whitted.tracer.imageio import to_srgb8, write_ppm
 
     img = _linear_test_image()
     if encoding == "srgb":
@@ -176,7 +176,7 @@ def test_code_steps_follow_the_srgb_curve():
 
 
 def test_wrong_size_unreadable_and_non_images_are_exit_2_in_one_line(tmp_path):
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     write_exr(tmp_path / "small.exr", np.zeros((10, 12, 3), np.float32))
     (tmp_path / "text.png").write_text("this is not a picture\n")
@@ -250,7 +250,7 @@ def test_rounding_bias_bound_is_half_a_step_without_noise_and_vanishes_with_it()
 
 
 def test_the_tracers_own_image_passes_in_every_format(tmp_path):
-    from tracer.imageio import to_srgb8
+    from whitted.tracer.imageio import to_srgb8
 
     scene = _scene("sphere_point", (64, 48))
     ref = tracer_reference(scene)
@@ -275,7 +275,7 @@ def test_mitsubas_own_path_tracer_passes_on_direct_light(name):
 
 
 def test_mitsubas_own_path_tracer_passes_through_glass(tmp_path):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     scene = load_scene(GLASS_LIGHTS)
     ref = tracer_reference(scene)
@@ -298,7 +298,7 @@ def test_a_one_percent_bias_in_a_correct_noisy_render_fails():
 
 
 def _render_with(monkeypatch, scene, module, name, fn):
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     with monkeypatch.context() as m:
         m.setattr(module, name, fn)
@@ -318,7 +318,7 @@ def _no_falloff(intensity, dist):
 def _rp_only(cos_i, eta):
     import drjit as dr
 
-    from tracer import fresnel
+    from whitted.tracer import fresnel
 
     c, rel = fresnel._sides(cos_i, eta)
     cos_t, tir = fresnel.snell_cos_t(cos_i, eta)
@@ -327,8 +327,8 @@ def _rp_only(cos_i, eta):
 
 
 def test_an_image_with_a_formula_bug_fails_from_the_command_line(tmp_path, monkeypatch):
-    from tracer import lights
-    from tracer.imageio import write_png
+    from whitted.tracer import lights
+    from whitted.tracer.imageio import write_png
 
     scene = _scene("sphere_point")
     write_png(tmp_path / "bug.png", _render_with(monkeypatch, scene, lights, "lambert_cosine",
@@ -346,9 +346,9 @@ def test_an_image_with_a_formula_bug_fails_from_the_command_line(tmp_path, monke
 
 
 def test_a_glass_formula_bug_is_placed_in_the_light_seen_through_glass(monkeypatch):
-    from reference.check import decomposition
-    from tracer import fresnel
-    from tracer.integrator import material_ids
+    from whitted.reference.check import decomposition
+    from whitted.tracer import fresnel
+    from whitted.tracer.integrator import material_ids
 
     scene = _scene("glass_sphere", (64, 48))
     ref = tracer_reference(scene)
@@ -365,8 +365,8 @@ def test_a_glass_formula_bug_is_placed_in_the_light_seen_through_glass(monkeypat
 def test_suspects_are_ranked_with_the_injected_bug_first(monkeypatch):
     # Three formula bugs switched on by monkeypatching; an image made with each (plus
     # noise of 1 % of the image's mean) must name that bug first, at a strength near 1.
-    from reference.suspects import Suspect, format_suspects, rank_suspects
-    from tracer import fresnel, lights
+    from whitted.reference.suspects import Suspect, format_suspects, rank_suspects
+    from whitted.tracer import fresnel, lights
 
     scene = _scene("glass_sphere", (48, 36))
     bugs = [("no-cosine", "Lambert's cosine n . l", "The illumination equation",
@@ -413,7 +413,7 @@ def test_idiff_thresholds_replace_the_per_pixel_rule_but_not_the_region_sums():
 
 
 def test_a_variance_layer_is_used_as_the_images_noise(tmp_path):
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     scene = _scene("sphere_point", (64, 48))
     ref = tracer_reference(scene)
@@ -434,7 +434,7 @@ def test_a_variance_layer_is_used_as_the_images_noise(tmp_path):
 
 @pytest.mark.slow
 def test_check_with_mitsuba_and_spp_from_the_command_line(tmp_path):
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     scene = _scene("three_lights")
     write_exr(tmp_path / "path.exr", _mitsuba_path(scene, 2).astype(np.float32))

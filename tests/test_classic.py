@@ -14,8 +14,8 @@ import numpy as np
 import pytest
 from conftest import run_cli, write_scene
 
-from tracer.errors import SceneError
-from tracer.scene import parse_scene
+from whitted.tracer.errors import SceneError
+from whitted.tracer.scene import parse_scene
 
 RTOL = 1e-5
 
@@ -44,7 +44,7 @@ to_world = [ {{ scale = 4 }}{turn} ]
 
 
 def render(text: str, lpe: str | None = None) -> np.ndarray:
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     return Integrator(parse_scene(tomllib.loads(text)), lpe=lpe).render().image[0, 0]
 
@@ -156,9 +156,9 @@ def test_a_ray_that_hits_nothing_returns_the_background():
 
 def _lobes(cos_in: float, outside: bool, ir: float = 1.7, ks: float = 0.2, kt: float = 0.85):
     """The classic kind's two lobes for a ray meeting a surface with normal +z."""
-    from tracer.backend import jit
-    from tracer.materials import classic
-    from tracer.materials.base import ShadingPoint
+    from whitted.tracer.backend import jit
+    from whitted.tracer.materials import classic
+    from whitted.tracer.materials.base import ShadingPoint
 
     bsdf = classic.BSDF([classic.Classic("g", ks=ks, kt=kt, ir=ir)])
     s = math.sqrt(1 - cos_in * cos_in)
@@ -222,7 +222,7 @@ def test_the_background_is_returned_by_trace_calls_within_depth_only(depth, expe
 
 
 def test_no_ray_is_traced_beyond_depth():
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     lamp = light_sphere((0, -20, 0), radius=3, kl=0.5, color=(1, 1, 1))
     text = scene(MIRROR, floor("mirror", TURN45) + lamp, max_depth=2)
@@ -349,9 +349,9 @@ def test_the_glow_and_the_background_must_be_hit_terms_on_mitsubas_side_too(mi, 
     # model's DEPTH excludes, and the comparison fails.
     from conftest import SCENES
 
-    from reference.compare import compare_scene
-    from reference.emitters import background, heckbert
-    from tracer import load_scene
+    from whitted.reference.compare import compare_scene
+    from whitted.reference.emitters import background, heckbert
+    from whitted.tracer import load_scene
 
     scene = load_scene(SCENES / "heckbert_minray.toml")
     for module in (heckbert, background):

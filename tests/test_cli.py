@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from conftest import MINIMAL, ROOT, run_cli, write_scene
 
-from tracer.imageio import read_exr
+from whitted.tracer.imageio import read_exr
 
 
 def test_help_explains_every_subcommand():
@@ -45,7 +45,7 @@ def test_render_writes_exr_png_and_ppm(tmp_path):
     png = np.asarray(Image.open(tmp_path / "img.png"))
     assert png.shape == (12, 16, 3) and png.dtype == np.uint8
     # sRGB-encoded: the PNG equals the EXR through the sRGB curve.
-    from tracer.imageio import to_srgb8
+    from whitted.tracer.imageio import to_srgb8
 
     assert np.array_equal(png, to_srgb8(img))
     lines = (tmp_path / "img.ppm").read_text().splitlines()
@@ -103,7 +103,7 @@ def test_compare_writes_outputs_and_exits_0_within_tolerance(tmp_path):
 
 
 def test_compare_names_its_reference_and_keeps_the_older_integrator_option(tmp_path):
-    from reference import cli
+    from whitted.reference import cli
 
     scene = write_scene(tmp_path, MINIMAL)
     for args, reference in ((["--integrator", "whitted"], "onelobe"),
@@ -128,8 +128,8 @@ def test_reference_command_renders_the_deterministic_reference(tmp_path):
 
 def test_compare_exits_1_when_the_tracer_is_wrong(tmp_path, monkeypatch, capsys):
     # A tracer with a 3 % gain error: the comparison must catch it.
-    from reference import cli
-    from tracer import integrator
+    from whitted.reference import cli
+    from whitted.tracer import integrator
 
     original = integrator.Integrator.render
 

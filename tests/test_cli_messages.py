@@ -2,7 +2,7 @@
 
 import pytest
 
-from reference.cli import ECHO_LIMIT, main, shorten
+from whitted.reference.cli import ECHO_LIMIT, main, shorten
 
 
 def test_shorten_keeps_short_text_and_cuts_long_text_keeping_both_ends():

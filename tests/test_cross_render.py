@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from reference.compare import (
+from whitted.reference.compare import (
     EXACT_LIMITS,
     choose_test,
     compare_scene,
@@ -26,10 +26,10 @@ from reference.compare import (
     judge,
     statistical_comparison,
 )
-from reference.render import render_reference
-from reference.report import quick_overrides
-from tracer import load_scene
-from tracer.scene import Dielectric
+from whitted.reference.render import render_reference
+from whitted.reference.report import quick_overrides
+from whitted.tracer import load_scene
+from whitted.tracer.scene import Dielectric
 
 BUILTIN = sorted(SCENES.glob("*.toml"))
 
@@ -89,7 +89,7 @@ def test_undeclared_schlick_fails_the_one_lobe_verdict_by_its_region_rule():
 
 
 def test_compare_cli_fails_on_undeclared_schlick(tmp_path):
-    from reference import cli
+    from whitted.reference import cli
 
     text = (SCENES / "glass_sphere.toml").read_text().replace('fresnel = "exact"',
                                                               'fresnel = "schlick"')
@@ -176,7 +176,7 @@ def test_direct_with_centred_strata_picks_lights_unevenly():
 
 
 def test_exported_xml_renders_the_same_picture_on_mitsuba(mi, tmp_path):
-    from reference.mitsuba_scene import write_xml
+    from whitted.reference.mitsuba_scene import write_xml
 
     scene = load_scene(SCENES / "ortho_transforms.toml").with_overrides(size=(80, 60), spp=16)
     files = write_xml(scene, tmp_path / "scene.xml")
@@ -191,7 +191,7 @@ def test_exported_xml_renders_the_same_picture_on_mitsuba(mi, tmp_path):
 def test_exported_xml_of_the_second_lectures_shapes_renders_the_same(mi, tmp_path, name):
     # Groups and instances, polygons and paraboloids as meshes (obj with uvs and normals),
     # mesh files, cylinders, disks, checkerboards and the Phong BSDF, through XML.
-    from reference.mitsuba_scene import write_xml
+    from whitted.reference.mitsuba_scene import write_xml
 
     scene = load_scene(SCENES / f"{name}.toml").with_overrides(size=(64, 48), spp=4)
     files = write_xml(scene, tmp_path / "scene.xml")
@@ -205,7 +205,7 @@ def test_exported_xml_of_the_second_lectures_shapes_renders_the_same(mi, tmp_pat
 
 
 def test_exported_xml_with_stock_direct_integrator_renders_on_plain_mitsuba(mi, tmp_path):
-    from reference.mitsuba_scene import write_xml
+    from whitted.reference.mitsuba_scene import write_xml
 
     scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(64, 48), spp=16)
     xml = write_xml(scene, tmp_path / "scene.xml", integrator="direct")[0]

@@ -27,7 +27,7 @@ def test_glass_at_max_depth_1000_renders_within_a_bound(tmp_path):
     out = tmp_path / "glass.exr"
     start = time.perf_counter()
     try:
-        r = subprocess.run([sys.executable, "-m", "reference.cli", "render", "glass_sphere",
+        r = subprocess.run([sys.executable, "-m", "whitted.reference.cli", "render", "glass_sphere",
                             "-o", str(out), "--size", "32x24", "--spp", "1",
                             "--max-depth", "1000"], capture_output=True, text=True,
                            timeout=BOUND, env={**os.environ, "HOME": str(home)})
@@ -45,8 +45,8 @@ def test_counts_summed_in_a_loop_equal_the_written_out_sums(monkeypatch):
     image to the bit."""
     import numpy as np
 
-    import tracer.integrator as ti
-    from tracer import load_scene
+    import whitted.tracer.integrator as ti
+    from whitted.tracer import load_scene
 
     scene = load_scene("scenes/tir_prisms.toml").with_overrides(size=(16, 12), spp=4,
                                                                   max_depth=72)

@@ -18,12 +18,12 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from reference.compare import compare_scene
-from reference.deterministic import SAMPLE_MAPS, render_deterministic
-from reference.fresnel_curves import exact64, float32_tolerance
-from tracer import load_scene
-from tracer.integrator import Integrator
-from tracer.scene import Disk, Rectangle, Sphere, Triangle, parse_scene
+from whitted.reference.compare import compare_scene
+from whitted.reference.deterministic import SAMPLE_MAPS, render_deterministic
+from whitted.reference.fresnel_curves import exact64, float32_tolerance
+from whitted.tracer import load_scene
+from whitted.tracer.integrator import Integrator
+from whitted.tracer.scene import Disk, Rectangle, Sphere, Triangle, parse_scene
 
 
 def _one_lobe(mi, bsdf, cos_i, flag):
@@ -47,7 +47,7 @@ def test_one_lobe_context_returns_the_lobe_with_its_fresnel_weight(mi, jit, ior,
     # (radiance is compressed into the smaller solid angle of the denser side), 0 under
     # total internal reflection. Mitsuba's plugin, our tracer's formula and the textbook
     # formula in float64 agree within float32 rounding at every angle, both sides.
-    from tracer import fresnel
+    from whitted.tracer import fresnel
 
     bsdf = mi.load_dict({"type": "dielectric", "int_ior": ior, "ext_ior": 1.0})
     theta = np.radians(np.arange(0.0, 89.6, 0.5))
@@ -205,9 +205,9 @@ def _emitter_scene(kind):
 
 def _points(scene, mi, sample_map, n=4096, seed=1):
     """(wi, value) of the tracer's area light and of Mitsuba's emitter for the same samples."""
-    from reference.mitsuba_scene import load
-    from tracer.backend import jit
-    from tracer.emitters import area
+    from whitted.reference.mitsuba_scene import load
+    from whitted.tracer.backend import jit
+    from whitted.tracer.emitters import area
 
     rng = np.random.default_rng(seed)
     u = rng.random((n, 2)).astype(np.float32)
@@ -289,7 +289,7 @@ def test_reference_follows_as_many_rays_per_level_as_the_tracer(name, untraced):
 def test_a_light_without_a_sample_map_is_judged_by_the_one_lobe_reference(monkeypatch):
     # A future emitting shape whose warp the reference cannot match: the comparison
     # falls back to the statistical verdict and says why, rather than failing.
-    import reference.deterministic as det
+    import whitted.reference.deterministic as det
 
     monkeypatch.setattr(det, "SAMPLE_MAPS", {k: v for k, v in SAMPLE_MAPS.items()
                                              if k is not Disk})
@@ -299,7 +299,7 @@ def test_a_light_without_a_sample_map_is_judged_by_the_one_lobe_reference(monkey
 
 
 def test_levels_larger_than_a_chunk_are_split_without_changing_the_image(monkeypatch):
-    import reference.deterministic as det
+    import whitted.reference.deterministic as det
 
     scene = load_scene(SCENES / "whitted_mix.toml").with_overrides(size=(48, 32), spp=4)
     whole = render_deterministic(scene)
@@ -314,7 +314,7 @@ def test_new_rays_start_where_mitsubas_start_them(mi, jit):
     # same point: the tracer's offset (spawn_offset, RAY_EPSILON_ULPS) must be Mitsuba's
     # Interaction::offset_p, 1500 float32 ulps of 1 + max |p| along the normal, on the
     # side the new ray goes to. Bit for bit, at every scale of the position.
-    from tracer.geometry import RAY_EPSILON_ULPS, spawn_offset
+    from whitted.tracer.geometry import RAY_EPSILON_ULPS, spawn_offset
 
     assert RAY_EPSILON_ULPS * 2.0 ** -24 == mi.math.RayEpsilon
     rng = np.random.default_rng(7)
@@ -340,7 +340,7 @@ def test_schlick_model_gives_schlicks_reflectance_and_snells_direction(mi, jit, 
     # Schlick's formula with the cosine on the less dense side, computed here in float64,
     # and the refracted direction and (n_i / n_t)^2 scale of Mitsuba's own dielectric.
     # The tracer's Schlick (tracer.fresnel) must agree with the same float64 formula.
-    from tracer import fresnel
+    from whitted.tracer import fresnel
 
     schlick = mi.load_dict({"type": "whitted_schlick", "int_ior": ior, "ext_ior": 1.0})
     exact = mi.load_dict({"type": "dielectric", "int_ior": ior, "ext_ior": 1.0})

@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-import reference.mutants  # noqa: F401  (declares the catalog's ids)
-from tracer import faults, load_scene
-from tracer.integrator import Integrator
+import whitted.reference.mutants  # noqa: F401  (declares the catalog's ids)
+from whitted.tracer import faults, load_scene
+from whitted.tracer.integrator import Integrator
 
 
 def _render(name, size=(48, 36), spp=4):

@@ -32,9 +32,9 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tracer.errors import SceneError
-from tracer.lpe import ALPHABET, LPEError, compile_lpe
-from tracer.scene import parse_scene
+from whitted.tracer.errors import SceneError
+from whitted.tracer.lpe import ALPHABET, LPEError, compile_lpe
+from whitted.tracer.scene import parse_scene
 
 QUICK = settings(derandomize=True, deadline=None, database=None,
                  suppress_health_check=[HealthCheck.too_slow, HealthCheck.data_too_large])
@@ -195,7 +195,7 @@ def test_the_loader_returns_a_scene_or_a_scene_error_long(doc):
 @given(st.binary(max_size=400) | st.text(alphabet="[]{}=\"'.,#\n \\0123456789aeflnrstux-+",
                                          max_size=400))
 def test_any_bytes_as_a_scene_file_load_or_fail_with_a_scene_error(tmp_path_factory, blob):
-    from tracer.scene import load_scene
+    from whitted.tracer.scene import load_scene
 
     p = tmp_path_factory.mktemp("blob") / "s.toml"
     p.write_bytes(blob if isinstance(blob, bytes) else blob.encode())
@@ -338,7 +338,7 @@ def command_lines(draw, commands, scenes_dir: Path, out: Path):
 
 
 def run_main(argv) -> tuple[int, str, str]:
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -360,7 +360,7 @@ def cli_contract(argv, target, out: Path) -> None:
         assert "Traceback" not in err
         if target is not None and argv[0] in ("render", "reference") \
                 and target.suffix == ".exr":
-            from tracer.imageio import read_exr
+            from whitted.tracer.imageio import read_exr
 
             assert np.isfinite(read_exr(target)).all(), argv
     for p in sorted(written, reverse=True):  # the next example starts from an empty folder

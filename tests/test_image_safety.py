@@ -19,7 +19,7 @@ import numpy as np
 import pytest
 from conftest import run_cli
 
-from tracer.errors import SceneError, UserError
+from whitted.tracer.errors import SceneError, UserError
 
 #: 100000 x 100000 RGB: about 3 TB to decode, in a file of about a kilobyte.
 HUGE = 100_000
@@ -78,7 +78,7 @@ def exr_bytes(width=8, height=6) -> bytes:
     """A valid float32 RGB OpenEXR file's bytes (ZIP-compressed scanlines, as written)."""
     import tempfile
 
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     image = np.random.default_rng(1).random((height, width, 3)).astype(np.float32)
     with tempfile.TemporaryDirectory() as d:
@@ -97,7 +97,7 @@ def bomb_exr(path) -> None:
 
 def cli(*args) -> tuple[int, str, str]:
     """``whitted ARGS`` in this process: (exit status, stdout, stderr)."""
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -117,7 +117,7 @@ def no_decoders(monkeypatch):
     import OpenEXR
     from PIL import Image
 
-    import reference.user_image as user_image
+    import whitted.reference.user_image as user_image
 
     def called(*a, **k):
         raise AssertionError("a decoder ran on an image that should have been refused")
@@ -150,7 +150,7 @@ def deadline(seconds: int):
 @pytest.mark.parametrize("as_envmap", [False, True], ids=["bitmap", "envmap"])
 def test_a_png_texture_claiming_a_huge_size_is_refused_before_decoding(tmp_path, no_decoders,
                                                                       as_envmap):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     bomb_png(tmp_path / "bomb.png")
     assert (tmp_path / "bomb.png").stat().st_size < 4096
@@ -165,7 +165,7 @@ def test_a_png_texture_claiming_a_huge_size_is_refused_before_decoding(tmp_path,
 
 def test_an_exr_texture_whose_data_window_claims_a_huge_size_is_refused_before_decoding(
         tmp_path, no_decoders):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     bomb_exr(tmp_path / "bomb.exr")
     with pytest.raises(SceneError, match="WHITTED_MAX_MEMORY"):
@@ -184,7 +184,7 @@ def _huge_headers(tmp_path):
 
 def test_check_refuses_images_whose_headers_claim_a_huge_size_before_decoding(tmp_path,
                                                                             no_decoders):
-    from reference.user_image import read_user_image
+    from whitted.reference.user_image import read_user_image
 
     for name in _huge_headers(tmp_path):
         with pytest.raises(UserError, match="WHITTED_MAX_MEMORY") as e:
@@ -197,8 +197,8 @@ def test_check_refuses_images_whose_headers_claim_a_huge_size_before_decoding(tm
 
 
 def test_the_image_limit_follows_whitted_max_memory(tmp_path, monkeypatch):
-    from reference.user_image import read_user_image
-    from tracer.imageio import write_png
+    from whitted.reference.user_image import read_user_image
+    from whitted.tracer.imageio import write_png
 
     write_png(tmp_path / "a.png", np.full((60, 80, 3), 0.5, np.float32))
     monkeypatch.setenv("WHITTED_MAX_MEMORY", "64K")
@@ -222,7 +222,7 @@ def test_a_fifo_as_checks_image_is_refused_at_once(tmp_path):
 
 @pytest.mark.parametrize("as_envmap", [False, True], ids=["bitmap", "envmap"])
 def test_a_fifo_or_a_device_as_a_texture_is_refused_at_once(tmp_path, as_envmap):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     os.mkfifo(tmp_path / "pipe.exr")
     os.symlink("/dev/zero", tmp_path / "zero.png")

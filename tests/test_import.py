@@ -1,6 +1,6 @@
 """Mitsuba XML import: the reader, the camera and film it needs, and Mitsuba's own scenes.
 
-Scenes from Mitsuba's data repository are stored under tests/data/mitsuba_scenes/
+Scenes from Mitsuba's data repository are stored under scenes/mitsuba-data/
 (see its README); each is imported, rendered by the tracer and compared with
 Mitsuba's render of the *original* file at max_depth 2.
 """
@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference.importer import (
+from whitted.reference.importer import (
     agreement,
     dict_to_xml,
     disagreements,
@@ -23,14 +23,14 @@ from reference.importer import (
     render_imported,
     render_original,
 )
-from tracer import load_scene
-from tracer.errors import SceneError
-from tracer.mitsuba_ior import IOR
-from tracer.mitsuba_xml import XMLImportError, read_xml
-from tracer.scene import Camera, parse_scene
+from whitted.tracer import load_scene
+from whitted.tracer.errors import SceneError
+from whitted.tracer.mitsuba_ior import IOR
+from whitted.tracer.mitsuba_xml import XMLImportError, read_xml
+from whitted.tracer.scene import Camera, parse_scene
 
 ROOT = Path(__file__).resolve().parent.parent
-DATA = ROOT / "tests" / "data" / "mitsuba_scenes" / "tests" / "scenes"
+DATA = ROOT / "scenes" / "mitsuba-data" / "tests" / "scenes"
 FLOATING = DATA / "floating_sphere" / "test_directional_direct.xml"
 INSTANCING = DATA / "instancing" / "test_instancing_path.xml"
 ORTHO = DATA / "orthographic_sensor" / "test_orthographic_path.xml"
@@ -38,7 +38,7 @@ ORTHO = DATA / "orthographic_sensor" / "test_orthographic_path.xml"
 
 @pytest.fixture(scope="module")
 def mi():
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     return mitsuba()
 
@@ -184,7 +184,7 @@ def test_outside_the_subset_names_element_and_line(tmp_path):
 
 
 def test_import_cli_writes_comments_and_exits_2_outside_the_subset(tmp_path, capsys):
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     (tmp_path / "parts").mkdir()
     _write(tmp_path / "parts", "light.xml", LIGHT)
@@ -201,7 +201,7 @@ def test_import_cli_writes_comments_and_exits_2_outside_the_subset(tmp_path, cap
 
 
 def test_render_accepts_xml(tmp_path):
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     (tmp_path / "parts").mkdir()
     _write(tmp_path / "parts", "light.xml", LIGHT)
@@ -223,8 +223,8 @@ def test_gaussian_filter_matches_mitsubas_at_the_strata_centres(mi):
     brightest pixel. 1e-4 of it leaves room, and is 1000 times below what a wrong
     stddev, a missing cut-off shift or a box filter changes (1e-2 to 1e-1).
     """
-    from reference.mitsuba_scene import load
-    from tracer.integrator import render
+    from whitted.reference.mitsuba_scene import load
+    from whitted.tracer.integrator import render
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(48, 36),
                                                                                spp=4)
@@ -248,7 +248,7 @@ def test_gaussian_splat_is_the_same_in_chunks_and_at_every_run():
     A chunk that drops its samples' reach into neighbouring chunks changes pixels by
     whole samples' weights (over 1e-2). The same render twice is the same, bit for bit.
     """
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(24, 18),
                                                                                spp=16)
@@ -265,8 +265,8 @@ def test_gaussian_splat_is_the_same_in_chunks_and_at_every_run():
 def test_camera_to_world_fov_axis_and_principal_point_match_mitsuba():
     """A mirrored to_world, a vertical fov and a principal point offset, judged by the
     deterministic reference at float precision (exact-strata)."""
-    from reference.compare import compare_scene
-    from tracer import transform as tf
+    from whitted.reference.compare import compare_scene
+    from whitted.tracer import transform as tf
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(40, 30),
                                                                                spp=4)
@@ -281,7 +281,7 @@ def test_camera_to_world_fov_axis_and_principal_point_match_mitsuba():
 
 def test_cube_matches_mitsubas_cube():
     """Mitsuba's cube against the tracer's, lit from above by an area light."""
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     data = {"film": {"width": 40, "height": 40, "spp": 4, "max_depth": 2},
             "camera": {"origin": [0, 0.5, 4], "target": [0, 0, 0], "fov": 40},
@@ -304,7 +304,7 @@ def test_cube_matches_mitsubas_cube():
 def test_jitter_moves_samples_within_their_strata():
     """Jittered strata: another image per seed, the same one on average (a flat-lit plane
     with an edge would show a bias; here the statistic is the image mean)."""
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(40, 30),
                                                                                spp=4)
@@ -325,8 +325,8 @@ def test_jitter_positions_are_uniform_in_their_stratum():
     or one coordinate copied into the other puts all points in 1 or 10 cells."""
     import drjit as dr
 
-    from tracer.backend import jit
-    from tracer.sampling import jitter_2d
+    from whitted.tracer.backend import jit
+    from whitted.tracer.sampling import jitter_2d
 
     idx = dr.arange(jit.UInt32, 102_400)
     u = jitter_2d(idx // 16, idx % 16, seed=3)
@@ -432,9 +432,9 @@ def test_export_then_import_gives_the_same_scene(path, tmp_path):
     the tessellated limits where the export writes a paraboloid as a mesh. Tracer-only
     parts (Schlick's Fresnel, the Phong ambient term) have no Mitsuba counterpart and are
     not exported, so the scene comes back as its comparable form (compare.comparable)."""
-    from reference.compare import comparable, image_metrics, judge
-    from reference.mitsuba_scene import write_xml
-    from tracer.integrator import render
+    from whitted.reference.compare import comparable, image_metrics, judge
+    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.tracer.integrator import render
 
     if path.stem in NOT_ROUND_TRIP:
         pytest.skip(NOT_ROUND_TRIP[path.stem])
@@ -494,8 +494,8 @@ def test_exported_obj_texture_coordinates_are_mitsubas_after_its_flip(mi, tmp_pa
     """`whitted export` writes meshes as OBJ files, whose v Mitsuba's obj plugin flips (as
     whitted's reader does): the file holds 1 - v, so that Mitsuba loading the XML sees the
     texture coordinates the tracer uses (the textured floor polygon of `textured`)."""
-    from reference.mitsuba_scene import write_xml
-    from tracer.meshio import load_mesh
+    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.tracer.meshio import load_mesh
 
     scene = load_scene(ROOT / "scenes" / "textured.toml")
     xml = tmp_path / "textured.xml"
@@ -521,9 +521,9 @@ def test_textured_opacity_round_trips_through_mitsuba_xml(tmp_path):
     here, and the export against Mitsuba's render in test_new_kinds.py."""
     from test_new_kinds import _mask_scene
 
-    from reference.compare import image_metrics, judge
-    from reference.mitsuba_scene import write_xml
-    from tracer.integrator import render
+    from whitted.reference.compare import image_metrics, judge
+    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.tracer.integrator import render
 
     scene = _mask_scene(tmp_path)
     xml = tmp_path / "masked.xml"

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from tracer.shapes import rectangle, sphere, triangle
+from whitted.tracer.shapes import rectangle, sphere, triangle
 
 
 def v3(jit, *rows):
@@ -212,11 +212,11 @@ def test_spheres_nearest_hit_and_occlusion_against_each_sphere_alone(jit, count)
     # sphere's own intersect(), and the shadow test blocked where that nearest hit lies
     # before tmax. 8 spheres are written into the kernel (roots compared as fractions, one
     # division), 20 are looped over (more than tracer.geometry.UNROLL).
-    from tracer.geometry import UNROLL
+    from whitted.tracer.geometry import UNROLL
 
     assert (count > UNROLL) == (count == 20)
-    from tracer.geometry import _SphereBlock
-    from tracer.scene import Sphere
+    from whitted.tracer.geometry import _SphereBlock
+    from whitted.tracer.scene import Sphere
 
     rng = np.random.default_rng(5)
     centres = rng.uniform(-2, 2, size=(count, 3))

@@ -11,11 +11,11 @@ import drjit as dr
 import numpy as np
 import pytest
 
-import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
-from reference.cli import resolve_scene
-from tracer import backend, load_scene
-from tracer.backend import jit, upload, upload_rows
-from tracer.integrator import Integrator
+from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+from whitted.reference.cli import resolve_scene
+from whitted.tracer import backend, load_scene
+from whitted.tracer.backend import jit, upload, upload_rows
+from whitted.tracer.integrator import Integrator
 
 
 def _hashes(fn) -> set:

@@ -20,12 +20,12 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCENES
 
-from reference import emitters as ref_emitters
-from reference import materials as ref_materials
-from tracer import emitters, materials
-from tracer.emitters import base as emitter_base
-from tracer.materials import base
-from tracer.scene import parse_scene
+from whitted.reference import emitters as ref_emitters
+from whitted.reference import materials as ref_materials
+from whitted.tracer import emitters, materials
+from whitted.tracer.emitters import base as emitter_base
+from whitted.tracer.materials import base
+from whitted.tracer.scene import parse_scene
 
 
 def test_every_kind_has_a_parser_a_tracer_behaviour_and_a_mitsuba_conversion():
@@ -113,7 +113,7 @@ class SkyEmitter(emitter_base.Emitter):
     def sample(self, p, origin, u):
         import drjit as dr
 
-        from tracer import lights
+        from whitted.tracer import lights
 
         # A direction uniform on the sphere: pdf 1 / (4 pi), so L / pdf = 4 pi L.
         _, wi = lights.sample_sphere_uniform(u, p * 0, 1.0)
@@ -176,7 +176,7 @@ def registered(monkeypatch):
 def _render(text, lpe=None, seed=0):
     import tomllib
 
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     return Integrator(parse_scene(tomllib.loads(text)), seed=seed, lpe=lpe).render()
 
@@ -235,8 +235,8 @@ def test_a_light_at_infinity_is_seen_by_escaping_rays_and_sampled_at_surfaces(ji
     # its seeds pooled, unlike a scene lit by delta lights only.
     import tomllib
 
-    from reference.compare import choose_test
-    from reference.deterministic import shares_light_samples
+    from whitted.reference.compare import choose_test
+    from whitted.reference.deterministic import shares_light_samples
 
     assert parse_scene(tomllib.loads(text)).samples_lights()
     # No shared sample points for it: the one-lobe reference and its z-test judge it.

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from tracer import load_scene, render
-from tracer.lpe import LPEError, compile_lpe
+from whitted.tracer import load_scene, render
+from whitted.tracer.lpe import LPEError, compile_lpe
 
 EXPRESSIONS = ["LDE", "LDS+E", "LS*E", "L(D|S)*E", "L.*E", "L[DS]E", "LE|LDE", "L(S|D)?S+E"]
 

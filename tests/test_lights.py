@@ -4,7 +4,7 @@ import math
 
 import numpy as np
 
-from tracer import lights
+from whitted.tracer import lights
 
 
 def v3(jit, *rows):
@@ -40,8 +40,8 @@ def test_spot_falloff_is_linear_in_angle_between_beam_width_and_cutoff(jit):
 
 def test_spot_falloff_matches_mitsubas_spot_emitter(jit, mi):
     # Mitsuba's spot light, pointing down -y from (0, 4, 0): compare I falloff / r^2.
-    from reference.mitsuba_scene import emitter_tree, to_dict
-    from tracer.scene import SpotLight
+    from whitted.reference.mitsuba_scene import emitter_tree, to_dict
+    from whitted.tracer.scene import SpotLight
 
     spot = SpotLight((0, 4, 0), (0, 0, 0), (5, 5, 5), cutoff_angle=30, beam_width=12)
     emitter = mi.load_dict(to_dict(emitter_tree(spot), mi))

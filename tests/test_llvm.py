@@ -10,7 +10,7 @@ import os
 import pytest
 from conftest import MINIMAL, run_cli, write_scene
 
-from tracer import llvm
+from whitted.tracer import llvm
 
 
 @pytest.mark.parametrize("name,major", [

@@ -14,15 +14,15 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from tracer import load_scene
-from tracer.errors import UserError
+from whitted.tracer import load_scene
+from whitted.tracer.errors import UserError
 
 DATA = Path(__file__).resolve().parent / "data" / "luxcore"
 
 
 @pytest.fixture(scope="module")
 def luxcore():
-    from reference import luxcore as lx
+    from whitted.reference import luxcore as lx
 
     if not lx.available():
         if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
@@ -35,8 +35,8 @@ def luxcore():
 
 
 def test_point_light_intensity_is_gain_times_colour_over_four_pi():
-    from reference.emitters import convert
-    from tracer.emitters.point import PointLight
+    from whitted.reference.emitters import convert
+    from whitted.tracer.emitters.point import PointLight
 
     p = convert(PointLight((1, 2, 3), (60, 30, 15)), "luxcore")
     # LuxCore: I = gain * color / (4 pi) without power and efficiency
@@ -48,8 +48,8 @@ def test_kinds_without_a_luxcore_conversion_refuse_in_one_line(monkeypatch):
     """The registry's default: any kind without luxcore(), a kind added later included."""
     import types
 
-    from reference import materials
-    from tracer.materials.phong import Phong
+    from whitted.reference import materials
+    from whitted.tracer.materials.phong import Phong
 
     with pytest.raises(UserError) as e:
         materials.convert(Phong("shiny"), "luxcore")
@@ -66,14 +66,14 @@ def test_kinds_without_a_luxcore_conversion_refuse_in_one_line(monkeypatch):
     ("phong_lobes", "phong: no LuxCore equivalent"),
 ])
 def test_scenes_that_do_not_map_are_refused(name, message):
-    from reference.luxcore_scene import describe
+    from whitted.reference.luxcore_scene import describe
 
     with pytest.raises(UserError, match=message):
         describe(load_scene(SCENES / f"{name}.toml"))
 
 
 def test_field_of_view_goes_to_the_longer_side():
-    from reference.luxcore_scene import describe
+    from whitted.reference.luxcore_scene import describe
 
     scene = load_scene(SCENES / "sphere_point.toml")
     wide = describe(scene.with_overrides(size=(80, 40))).props
@@ -85,8 +85,8 @@ def test_field_of_view_goes_to_the_longer_side():
 
 
 def test_tessellated_sphere_stays_within_its_chord_bound():
-    from reference.luxcore_scene import TESSELLATION, sphere_mesh
-    from tracer.scene import Sphere
+    from whitted.reference.luxcore_scene import TESSELLATION, sphere_mesh
+    from whitted.tracer.scene import Sphere
 
     s = Sphere((1.0, -2.0, 0.5), 0.7, None)
     v, f, n = sphere_mesh(s)
@@ -111,8 +111,8 @@ def test_passes_become_pixel_means_with_their_noise():
     films whose sub-pixels all differ (a wrong grouping of rows or columns fails)."""
     from types import SimpleNamespace
 
-    from reference.luxcore import _result
-    from reference.luxcore_runner import pass_moments
+    from whitted.reference.luxcore import _result
+    from whitted.reference.luxcore_runner import pass_moments
 
     k, h, w, p = 3, 4, 5, 3
     rng = np.random.default_rng(7)
@@ -135,7 +135,7 @@ def test_passes_become_pixel_means_with_their_noise():
 def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
     import drjit as dr
 
-    from reference.luxcore import SharedCores
+    from whitted.reference.luxcore import SharedCores
 
     class Job:
         alive = True
@@ -191,8 +191,8 @@ def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
 
 
 def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
-    from reference import cli
-    from reference import luxcore as lx
+    from whitted.reference import cli
+    from whitted.reference import luxcore as lx
 
     monkeypatch.setattr(lx, "available", lambda: False)
     rc = cli.main(["reference", "sphere_point", "-o", str(tmp_path / "x.exr"),
@@ -228,7 +228,7 @@ def test_spot_light_profile_is_pbrt_falloff_over_cos(luxcore):
     tracer's (and Mitsuba's) linear falloff. A spot converted with the point
     light's 4 pi gain, or a profile equal to the tracer's, fails.
     """
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(DATA / "spot_probe.toml")
     lux = luxcore.render(scene, passes=2, subsamples=4)
@@ -256,8 +256,8 @@ def test_three_renderers_agree_on_specular_scenes(luxcore):
     sizes, in one LuxCore child; a wrong light gain, a camera one row off or the
     glass's indices swapped in the conversion makes LuxCore the odd one out.
     """
-    from reference.luxcore_compare import compare_three
-    from reference.report import quick_overrides
+    from whitted.reference.luxcore_compare import compare_three
+    from whitted.reference.report import quick_overrides
 
     names = ["glass_sphere", "tir_prisms", "whitted_mix"]
     threes = compare_three([quick_overrides(load_scene(SCENES / f"{n}.toml")) for n in names],
@@ -268,7 +268,7 @@ def test_three_renderers_agree_on_specular_scenes(luxcore):
 
 
 def test_area_lights_with_mirrors_are_not_compared(luxcore):
-    from reference.luxcore_compare import compare_three
+    from whitted.reference.luxcore_compare import compare_three
 
     [t] = compare_three([load_scene(SCENES / "area_lights.toml")], quick=True)
     assert t.verdict == "not compared" and "caustics" in t.detail
@@ -291,7 +291,7 @@ def test_report_shows_the_vote_and_keeps_the_tracers_exit_status(luxcore, tmp_pa
 
     spot_floor: LuxCore's spot profile differs (test above), and the vote names it.
     """
-    from reference.report import build_report
+    from whitted.reference.report import build_report
 
     report = build_report(tmp_path, [SCENES / "spot_floor.toml"], quick=True,
                           log=lambda *_: None, fresnel=False, luxcore=True)
@@ -308,7 +308,7 @@ def test_block_allowance_is_the_binomial_quantile_of_noise():
     family-wise 1e-3: checked against the binomial tail computed here directly."""
     from math import comb, erf, sqrt
 
-    from reference.luxcore_compare import blocks_allowed
+    from whitted.reference.luxcore_compare import blocks_allowed
 
     p = 1 - erf(3 / sqrt(2))
     def tail(n, j):  # P(count > j); terms beyond j + 40 are below 1e-60 here

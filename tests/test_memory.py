@@ -19,8 +19,8 @@ SCENE = Path(__file__).resolve().parents[1] / "scenes" / "heckbert_minray.toml"
 
 CHILD = textwrap.dedent("""
     import json, resource, sys
-    from tracer import load_scene
-    from tracer.integrator import Integrator
+    from whitted.tracer import load_scene
+    from whitted.tracer.integrator import Integrator
     scene = load_scene(sys.argv[2]).with_overrides(size=(1920, 1080), spp=4, max_depth=26)
     chunk = json.loads(sys.argv[1])
     Integrator(scene, chunk_samples=chunk).render()

@@ -13,8 +13,14 @@ import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
-from tracer.errors import UserError
-from tracer.meshio import MeshData, MeshError, compute_vertex_normals, face_normals, load_mesh
+from whitted.tracer.errors import UserError
+from whitted.tracer.meshio import (
+    MeshData,
+    MeshError,
+    compute_vertex_normals,
+    face_normals,
+    load_mesh,
+)
 
 #: Mitsuba stores positions, normals and uvs in float32 and computes its normals in
 #: float32: a unit vector is then off by a few 2^-24; 1e-5 leaves a wide margin.
@@ -754,7 +760,7 @@ def test_a_mesh_file_beyond_the_memory_limit_is_refused_before_reading(tmp_path,
 
 
 def test_bad_mesh_files_are_one_line_exit_2_through_the_command_line(tmp_path):
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     cases = {
         "header.ply": ("\u00b2", None),
@@ -810,7 +816,7 @@ material = "white"
 @pytest.fixture
 def parses(monkeypatch):
     """Counts the files :func:`load_mesh` parses (cache misses), on an empty cache."""
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     meshio.clear_cache()
     calls = []
@@ -843,7 +849,7 @@ def test_loading_an_unchanged_file_again_reuses_the_parsed_mesh(tmp_path, parses
 
 
 def test_loading_a_scene_twice_parses_its_mesh_once(tmp_path, parses):
-    from tracer.scene import load_scene
+    from whitted.tracer.scene import load_scene
 
     path = write_ply(tmp_path / "m.ply", "binary_little_endian",
                      [("vertex", XYZ, VERTS), ("face", FACE_PROP, FACES)])
@@ -854,7 +860,7 @@ def test_loading_a_scene_twice_parses_its_mesh_once(tmp_path, parses):
 
 
 def test_the_cache_is_bounded_least_recently_used_first_out(tmp_path, parses, monkeypatch):
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     monkeypatch.setattr(meshio, "CACHE_MAX_MESHES", 2)
     files = [write(tmp_path, f"{k}.obj", SQUARE + "f 1 2 3\n") for k in "abc"]
@@ -869,7 +875,7 @@ def test_the_cache_is_bounded_least_recently_used_first_out(tmp_path, parses, mo
 
 
 def test_a_file_changed_while_it_is_read_is_not_cached(tmp_path, parses, monkeypatch):
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     path = write(tmp_path, "a.obj", SQUARE + "f 1 2 3\n")
     counting = meshio._read_mesh
@@ -959,7 +965,7 @@ def damaged_meshes(draw):
 
 
 def mesh_contract(tmp_path_factory, suffix: str, data: bytes) -> None:
-    from tracer import meshio
+    from whitted.tracer import meshio
 
     path = tmp_path_factory.mktemp("mesh") / ("m" + suffix)
     path.write_bytes(data)
@@ -1004,7 +1010,7 @@ def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line_long(
 def test_written_ply_reads_back_here_and_in_mitsuba(tmp_path, mi, with_normals):
     # tracer.meshio.write_ply is how LuxCore gets its meshes (reference/luxcore.py): what
     # it writes must be the mesh given, as float32, to this reader and to another one.
-    from tracer.meshio import write_ply as write_mesh
+    from whitted.tracer.meshio import write_ply as write_mesh
 
     rng = np.random.default_rng(11)
     v = rng.normal(size=(40, 3))
@@ -1028,7 +1034,7 @@ def test_written_ply_reads_back_here_and_in_mitsuba(tmp_path, mi, with_normals):
 
 
 def test_written_ply_refuses_faces_out_of_range(tmp_path):
-    from tracer.meshio import write_ply as write_mesh
+    from whitted.tracer.meshio import write_ply as write_mesh
 
     with pytest.raises(ValueError, match="out of range"):
         write_mesh(tmp_path / "w.ply", np.zeros((3, 3)), [[0, 1, 3]])

@@ -23,9 +23,9 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCENES, run_cli
 
-from reference.minray import agreement, explain, ray_count, summary
-from tracer import load_scene
-from tracer.imageio import ppm_values, read_ppm, write_ppm
+from whitted.reference.minray import agreement, explain, ray_count, summary
+from whitted.tracer import load_scene
+from whitted.tracer.imageio import ppm_values, read_ppm, write_ppm
 
 DATA = ROOT / "tests" / "data" / "minray"
 DEPTHS = (1, 2, 3, 4, 5, 10, 20)
@@ -44,7 +44,7 @@ def minray_scene(size: int, depth: int):
 
 
 def check_reproduced(size: int, depth: int):
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     s = minray_scene(size, depth)
     ours = ppm_values(Integrator(s).render().image)
@@ -84,7 +84,7 @@ def test_minrays_refraction_is_needed_to_reproduce_its_glass():
     # minray's images show.
     from dataclasses import replace
 
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     s = minray_scene(32, 3)
     glass = s.materials["glass"]
@@ -163,7 +163,7 @@ def test_minrays_rays_are_counted_exactly_at_256_pixels(depth):
 
 
 def test_the_tracer_traces_fewer_rays_than_minray_by_dropping_zero_weights():
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     for depth in (1, 5):
         r = Integrator(minray_scene(32, depth)).render()

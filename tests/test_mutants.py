@@ -17,12 +17,12 @@ from pathlib import Path
 import pytest
 from conftest import ROOT, SCENES
 
-from reference import cli, mutants
-from reference.compare import image_metrics, judge
-from reference.deterministic import DeterministicReference
-from reference.report import _mutants_html, _mutants_markdown
-from tracer import faults, load_scene
-from tracer.integrator import Integrator
+from whitted.reference import cli, mutants
+from whitted.reference.compare import image_metrics, judge
+from whitted.reference.deterministic import DeterministicReference
+from whitted.reference.report import _mutants_html, _mutants_markdown
+from whitted.tracer import faults, load_scene
+from whitted.tracer.integrator import Integrator
 
 BUILTIN = sorted(SCENES.glob("*.toml"))
 

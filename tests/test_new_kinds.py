@@ -13,10 +13,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference import mutants  # noqa: F401  (declares the catalog's fault ids)
-from tracer import faults
-from tracer.ior import CONDUCTORS, DIELECTRICS
-from tracer.scene import SceneError, parse_scene
+from whitted.reference import mutants  # noqa: F401  (declares the catalog's fault ids)
+from whitted.tracer import faults
+from whitted.tracer.ior import CONDUCTORS, DIELECTRICS
+from whitted.tracer.scene import SceneError, parse_scene
 
 
 def test_named_indices_are_mitsubas(mi):
@@ -40,7 +40,7 @@ def test_named_indices_are_mitsubas(mi):
 
 
 def test_conductor_fresnel_matches_mitsuba_within_float32_rounding(mi):
-    from reference.fresnel_curves import conductor_curves
+    from whitted.reference.fresnel_curves import conductor_curves
 
     rows = conductor_curves(mi, step=1.0)
     assert rows and all(r["pass"] for r in rows), [r for r in rows if not r["pass"]]
@@ -77,7 +77,7 @@ def test_named_iors_and_conductors_are_read_and_unknown_names_refused():
 def test_diffuse_fresnel_reflectance_fit_is_mitsubas(mi, jit):
     # Both evaluate the same two published fits in float32 (tracer.fresnel docstring):
     # a few ulps of F_dr <= 1 apart at most (8 ulp of 1 = 1e-6).
-    from tracer import fresnel
+    from whitted.tracer import fresnel
 
     eta = np.linspace(0.2, 5, 400, dtype=np.float32)
     ours = np.asarray(fresnel.fresnel_diffuse_reflectance(jit.Float(eta)))
@@ -93,8 +93,8 @@ def test_area_lights_on_a_mesh_a_cube_a_polygon_and_a_cylinder_agree_with_mitsub
     # one-lobe reference judges them by the z-test of reference.compare (Sidak alpha
     # 0.01 per pixel, >= 99.75 % passing; regions within alpha 0.001), the tracer's
     # image the mean of 16 seeds.
-    from reference.compare import compare_scene
-    from tracer import load_scene
+    from whitted.reference.compare import compare_scene
+    from whitted.tracer import load_scene
 
     scene = load_scene(Path(__file__).parent / "data" / "shape_lights.toml")
     result, tracer_img, _ = compare_scene(scene, tmp_path, second_opinion=False)
@@ -155,7 +155,7 @@ def _bitmap_scene(tmp_path, wrap="repeat"):
 
     from PIL import Image
 
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     rng = np.random.default_rng(7)
     # Odd sizes, so that rows and columns cannot be swapped unnoticed.
@@ -167,7 +167,7 @@ def _bitmap_scene(tmp_path, wrap="repeat"):
 
 @pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
 def test_bitmap_textures_agree_with_mitsuba_at_float_precision(tmp_path, wrap):
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     scene = _bitmap_scene(tmp_path, wrap)
     result, tracer_img, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
@@ -178,7 +178,7 @@ def test_bitmap_textures_agree_with_mitsuba_at_float_precision(tmp_path, wrap):
 
 def test_bitmap_texture_rows_read_from_the_top_as_mitsuba_does(tmp_path):
     # The same comparison fails with v measured from the bottom (the catalog's bug).
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     scene = _bitmap_scene(tmp_path)
     with faults.active("bitmap-v-flipped"):
@@ -261,7 +261,7 @@ def _mask_scene(tmp_path):
 
 
 def test_colour_and_textured_opacity_read_as_mitsubas_eval_1(tmp_path):
-    from tracer.materials.textures import LUMINANCE, Bitmap, Checkerboard
+    from whitted.tracer.materials.textures import LUMINANCE, Bitmap, Checkerboard
 
     scene = _mask_scene(tmp_path)
     m = {name: mat.mask_opacity for name, mat in scene.materials.items()}
@@ -271,7 +271,7 @@ def test_colour_and_textured_opacity_read_as_mitsubas_eval_1(tmp_path):
     assert isinstance(m["image"], Bitmap)
     from PIL import Image
 
-    from tracer.materials.textures import srgb_decode
+    from whitted.tracer.materials.textures import srgb_decode
 
     rgb = srgb_decode(np.asarray(Image.open(tmp_path / "tex.png"), np.float64) / 255)
     np.testing.assert_allclose(m["image"].texels[..., 1], rgb @ np.asarray(LUMINANCE),
@@ -282,7 +282,7 @@ def test_textured_opacity_agrees_with_mitsuba_at_float_precision(tmp_path):
     # The deterministic reference follows the mask's null lobe with Mitsuba's own
     # BSDF.sample at the same uv: agreement to float32 rounding (the median relative
     # difference of the bitmap test above) is expected.
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     scene = _mask_scene(tmp_path)
     result, tracer_img, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
@@ -295,7 +295,7 @@ def test_textured_opacity_agrees_with_mitsuba_at_float_precision(tmp_path):
 def test_textured_opacity_looked_up_wrongly_is_caught(tmp_path, fault):
     # The opacity is read through the same texture lookup as a reflectance: with the
     # checkerboard at (v, u) or the bitmap's rows from the bottom the comparison fails.
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     scene = _mask_scene(tmp_path)
     with faults.active(fault):
@@ -312,7 +312,7 @@ def test_colour_opacity_is_the_value_mitsubas_mask_reads(mi, colour):
     # 1 - that here), each at most 2^-24 of a value up to 1.
     import drjit as dr
 
-    from tracer.materials.textures import scalar_texture
+    from whitted.tracer.materials.textures import scalar_texture
 
     mask = mi.load_dict({"type": "mask", "opacity": {"type": "rgb", "value": colour},
                          "material": {"type": "diffuse"}})

@@ -21,10 +21,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from reference import cli
-from reference import luxcore as lx
-from tracer import load_scene
-from tracer.errors import UserError
+from whitted.reference import cli
+from whitted.reference import luxcore as lx
+from whitted.tracer import load_scene
+from whitted.tracer.errors import UserError
 
 ROOT = Path(__file__).resolve().parent.parent
 REPORT = ["report", "--scenes", "glass_sphere", "--quick", "--no-fresnel"]
@@ -178,7 +178,7 @@ def test_a_pass_is_limited_by_its_cpu_time_not_by_the_wall_clock(tmp_path, capsy
     """A pass that waits 1 s for a core (here: sleeps) uses no CPU time and is within a
     0.3 s limit; one that spins 0.5 s is not. At nice 19 beside a busy machine a pass
     may wait minutes, which a wall-clock limit took for LuxCore being slow."""
-    from reference.luxcore_runner import run_job
+    from whitted.reference.luxcore_runner import run_job
 
     run_job(_FakeLuxCore(wall=1.0, cpu=0.0), _job(tmp_path, 0.3))
     with np.load(tmp_path / "job0.out.npz") as out:
@@ -199,8 +199,8 @@ def test_a_tiny_report_passes_while_the_cpu_is_saturated(tmp_path):
             for _ in range(2)]
     try:
         out = tmp_path / "report"
-        r = subprocess.run([sys.executable, "-m", "reference.cli", REPORT[0], "-o", str(out),
-                            *REPORT[1:]], capture_output=True, text=True, timeout=240,
+        r = subprocess.run([sys.executable, "-m", "whitted.reference.cli", REPORT[0], "-o",
+                            str(out), *REPORT[1:]], capture_output=True, text=True, timeout=240,
                            cwd=ROOT, env={**os.environ,
                                           "WHITTED_LUXCORE_TIMEOUT": str(SATURATED_WAIT)})
     finally:

@@ -15,12 +15,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from tests.test_bvh import assert_same_hits, random_rays, torus, v3
-from tracer import load_scene
-from tracer.bvh import BVH, INVALID
-from tracer.geometry import Geometry
-from tracer.integrator import GROUP, Integrator
+from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+from whitted.tracer import load_scene
+from whitted.tracer.bvh import BVH, INVALID
+from whitted.tracer.geometry import Geometry
+from whitted.tracer.integrator import GROUP, Integrator
 
 
 def _rays(rng, n, k, coherent):

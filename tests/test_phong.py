@@ -13,8 +13,8 @@ import drjit as dr
 import numpy as np
 import pytest
 
-from tracer import phong
-from tracer.lights import coordinate_system
+from whitted.tracer import phong
+from whitted.tracer.lights import coordinate_system
 
 MODELS = ("phong", "blinn-phong")
 COS_ERR = 2e-6      # ~32 ulp at 1: a dozen roundings in dots, norms and a rotation, with margin

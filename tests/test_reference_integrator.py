@@ -3,8 +3,8 @@
 import numpy as np
 from conftest import SCENES
 
-from reference.render import render_reference
-from tracer import load_scene
+from whitted.reference.render import render_reference
+from whitted.tracer import load_scene
 
 
 def test_centred_strata_quantise_one_dimensional_choices(mi):
@@ -45,7 +45,7 @@ def test_reference_moments_give_the_variance_of_the_pixel_mean():
 def test_random_aov_marks_the_pixels_where_the_reference_draws_lobes():
     # Through the glass a sample's lobe is drawn at random; on the floor and the panels,
     # lit by a point and a directional light, nothing is.
-    from tracer.integrator import material_ids
+    from whitted.tracer.integrator import material_ids
 
     scene = load_scene(SCENES / "glass_sphere.toml").with_overrides(size=(40, 30), spp=16)
     r = render_reference(scene, moments=True, passes=2)

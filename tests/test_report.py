@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from reference.report import build_report, select_scenes
+from whitted.reference.report import build_report, select_scenes
 
 
 def test_quick_report_writes_html_markdown_and_json(tmp_path):
@@ -61,10 +61,10 @@ def _uses_exact_fresnel(path: Path) -> bool:
     Fresnel equations (a declared Schlick is judged with them too, see compare.comparable),
     or a thin dielectric or a plastic, whose weights are made of them; the classic model's
     fixed weights have no Fresnel term, a conductor's is the complex one."""
-    from reference.compare import comparable
-    from tracer import load_scene
-    from tracer.materials import plastic, thindielectric
-    from tracer.scene import Dielectric
+    from whitted.reference.compare import comparable
+    from whitted.tracer import load_scene
+    from whitted.tracer.materials import plastic, thindielectric
+    from whitted.tracer.scene import Dielectric
 
     scene = comparable(load_scene(path))
     return any((isinstance(m, Dielectric) and m.fresnel == "exact") or
@@ -81,7 +81,7 @@ def test_report_fails_exactly_the_glass_scenes_when_fresnel_is_wrong(tmp_path, m
     # Fresnel curves; the others (no glass, or the classic model's fixed weights) must pass.
     import drjit as dr
 
-    from tracer import fresnel
+    from whitted.tracer import fresnel
 
     def wrong(cos_i, eta):
         c, rel = fresnel._sides(cos_i, eta)
@@ -119,8 +119,8 @@ def test_report_covers_the_light_inside_glass_with_a_second_opinion(tmp_path):
 
 def test_report_fails_when_the_camera_is_mirrored(tmp_path, monkeypatch):
     # Another: the image's x axis flipped (world +x drawn on the left).
-    from tracer import integrator
-    from tracer.camera import generate_rays
+    from whitted.tracer import integrator
+    from whitted.tracer.camera import generate_rays
 
     def mirrored(camera, width, height, film_x, film_y):
         return generate_rays(camera, width, height, width - film_x, film_y)
@@ -179,7 +179,7 @@ def test_report_page_loads_every_image_in_a_real_browser(tmp_path):
 
 
 def _srgb8(x: float) -> int:
-    from tracer.imageio import srgb_encode
+    from whitted.tracer.imageio import srgb_encode
 
     return int(np.round(float(srgb_encode(np.array(x))) * 255))
 
@@ -289,7 +289,7 @@ def test_report_viewer_compares_tracer_and_mitsuba_in_a_real_browser(tmp_path):
                           fresnel=False)
     page = (out / "index.html").read_text()
     _offline(page)
-    from tracer.imageio import read_exr
+    from whitted.tracer.imageio import read_exr
 
     files = report.scenes[0]["files"]
     tracer_img, mitsuba_img = read_exr(files["tracer.exr"]), read_exr(files["mitsuba.exr"])
@@ -302,9 +302,9 @@ def test_check_page_viewer_in_a_real_browser(tmp_path):
     from browser import Browser
 
     exe = _need_browser()
-    from tracer import load_scene
-    from tracer.imageio import write_exr
-    from tracer.integrator import Integrator
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import write_exr
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(64, 48))
     img = Integrator(scene).render().image
@@ -316,7 +316,7 @@ def test_check_page_viewer_in_a_real_browser(tmp_path):
     assert r.returncode == 1, r.stdout + r.stderr
     page = (tmp_path / "ck" / "check.html").read_text()
     _offline(page)
-    from tracer.imageio import read_exr
+    from whitted.tracer.imageio import read_exr
 
     ref = read_exr(tmp_path / "ck" / "reference.exr")
     with Browser(exe) as b:
@@ -341,9 +341,9 @@ def test_suite_page_has_one_working_viewer_per_graded_scene(tmp_path):
     from browser import Browser
 
     exe = _need_browser()
-    from tracer import load_scene
-    from tracer.imageio import write_exr
-    from tracer.integrator import Integrator
+    from whitted.tracer import load_scene
+    from whitted.tracer.imageio import write_exr
+    from whitted.tracer.integrator import Integrator
 
     images = tmp_path / "imgs"
     images.mkdir()
@@ -370,7 +370,7 @@ def test_heat_map_colours_follow_the_log_scale(tmp_path):
     32 x 32, the most, for an image this small)."""
     from PIL import Image
 
-    from reference.compare import _inferno_lut, heat_map
+    from whitted.reference.compare import _inferno_lut, heat_map
 
     heat_map(np.array([[1e-8, 1e-4, 1.0, 10.0]]), tmp_path / "d.png")
     img = np.asarray(Image.open(tmp_path / "d.png").convert("RGB"))

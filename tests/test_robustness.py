@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from conftest import MINIMAL, ROOT, write_scene
 
-from tracer.imageio import read_exr
+from whitted.tracer.imageio import read_exr
 
 AREA = """
 [film]
@@ -52,7 +52,7 @@ emitter = { radiance = 4 }
 
 def cli(*args) -> tuple[int, str, str]:
     """``whitted ARGS`` in this process: (exit status, stdout, stderr)."""
-    from reference.cli import main
+    from whitted.reference.cli import main
 
     out, err = io.StringIO(), io.StringIO()
     with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
@@ -82,7 +82,7 @@ def test_any_integer_seed_renders_an_area_light_scene(tmp_path, seed):
 
 
 def test_large_seeds_are_hashed_not_folded_onto_small_ones(tmp_path):
-    from tracer.sampling import seed32
+    from whitted.tracer.sampling import seed32
 
     assert seed32(7) == 7 and seed32(2**32 - 1) == 2**32 - 1
     for big in (2**32, 2**32 + 7, -1, -(2**40), 10**30):
@@ -222,7 +222,7 @@ def test_an_image_that_overflows_float32_is_refused_not_written(tmp_path):
 
 
 def test_metrics_json_is_strict_json_even_for_infinite_metrics(tmp_path):
-    from reference.compare import write_json
+    from whitted.reference.compare import write_json
 
     write_json(tmp_path / "m.json", {"a": math.inf, "b": [math.nan, 1.0], "c": {"d": -math.inf}})
 
@@ -281,7 +281,7 @@ def test_a_name_that_is_not_utf8_is_written_and_printed_escaped(tmp_path):
 def test_os_errors_while_writing_are_one_line(tmp_path, monkeypatch):
     import errno
 
-    from tracer import imageio
+    from whitted.tracer import imageio
 
     def full(*a, **k):
         raise OSError(errno.ENOSPC, "No space left on device")
@@ -357,7 +357,7 @@ def test_deeply_nested_toml_is_refused_in_one_line(tmp_path, text):
                                   "L" + "." * 19 + "D.*E", "L" + "((((((((((D+)+)+)+)+)+)+)+)+)+)"
                                   * 3 + "E"])
 def test_light_path_expressions_are_bounded_in_size_and_states(tmp_path, expr):
-    from tracer.lpe import LPEError, compile_lpe
+    from whitted.tracer.lpe import LPEError, compile_lpe
 
     t0 = time.perf_counter()
     try:
@@ -393,7 +393,7 @@ def test_compare_with_direct_on_a_glass_scene_is_refused_before_rendering(tmp_pa
 
 
 def test_seed_is_offered_only_where_it_is_used():
-    from reference.cli import build_parser
+    from whitted.reference.cli import build_parser
 
     p = build_parser()
     subs = next(a for a in p._actions if a.dest == "command").choices
@@ -424,7 +424,7 @@ def test_commands_page_is_generated_from_the_parser_and_documents_every_option()
     import importlib.util
     import re
 
-    from reference.cli import build_parser
+    from whitted.reference.cli import build_parser
 
     spec = importlib.util.spec_from_file_location("make_commands",
                                                   ROOT / "docs" / "make_commands.py")
@@ -481,13 +481,13 @@ def _instances(n: int, **kw):
     sys.path.insert(0, str(ROOT / "benchmarks"))
     from bench_instances import instances_scene_text
 
-    from tracer.scene import parse_scene
+    from whitted.tracer.scene import parse_scene
 
     return parse_scene(tomllib.loads(instances_scene_text(n, **kw)), f"inst{n}.toml")
 
 
 def test_many_instances_sit_in_one_hierarchy_of_logarithmic_depth(jit):
-    from tracer.geometry import Geometry, _InstanceSetBlock
+    from whitted.tracer.geometry import Geometry, _InstanceSetBlock
 
     scene = _instances(1000)
     geo = Geometry(scene)
@@ -497,8 +497,8 @@ def test_many_instances_sit_in_one_hierarchy_of_logarithmic_depth(jit):
 
 
 def test_instances_behind_the_hierarchy_render_as_instances_one_by_one(jit):
-    from tracer import geometry
-    from tracer.integrator import Integrator
+    from whitted.tracer import geometry
+    from whitted.tracer.integrator import Integrator
 
     scene = _instances(40, width=48, height=36, spp=4)
     tree = Integrator(scene).render().image
@@ -516,9 +516,9 @@ def test_a_hierarchy_of_mesh_instances_renders_as_the_instances_one_by_one(jit):
     """A group with a mesh (its own BVH, traversed inside the instances' one) and glass."""
     import tomllib
 
-    from tracer import geometry
-    from tracer.integrator import Integrator
-    from tracer.scene import parse_scene
+    from whitted.tracer import geometry
+    from whitted.tracer.integrator import Integrator
+    from whitted.tracer.scene import parse_scene
 
     text = ("[film]\nwidth = 32\nheight = 24\nspp = 4\nmax_depth = 3\n"
             "[camera]\norigin = [0, 6, 14]\ntarget = [0, 0, 0]\n"
@@ -543,7 +543,7 @@ def test_a_hierarchy_of_mesh_instances_renders_as_the_instances_one_by_one(jit):
 
 
 def test_many_instances_convert_to_mitsuba(mi):
-    from reference.mitsuba_scene import load
+    from whitted.reference.mitsuba_scene import load
 
     scene = _instances(1000)
     t0 = time.perf_counter()
@@ -558,7 +558,7 @@ def test_interrupted_depth_sweep_leaves_no_partial_folder(tmp_path):
     out = tmp_path / "sweep"
     # Ctrl-C as at a terminal: a shell that started this run in the background without job
     # control leaves SIGINT ignored, and a child inherits that (it then never sees the signal).
-    p = subprocess.Popen([sys.executable, "-m", "reference.cli", "depth-sweep",
+    p = subprocess.Popen([sys.executable, "-m", "whitted.reference.cli", "depth-sweep",
                           "heckbert_minray", "--depths", "1-60", "--no-mitsuba", "-o", str(out)],
                          cwd=ROOT, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                          preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
@@ -578,8 +578,8 @@ def test_ctrl_c_inside_a_symbolic_loop_is_an_interrupt(tmp_path, monkeypatch, ca
     (The test above met it by chance, when its Ctrl-C fell inside the tracing.)"""
     import drjit as dr
 
-    from reference import cli
-    from tracer.backend import jit
+    from whitted.reference import cli
+    from whitted.tracer.backend import jit
 
     def body(i):
         raise KeyboardInterrupt
@@ -602,8 +602,8 @@ def test_ctrl_c_inside_a_symbolic_loop_is_an_interrupt(tmp_path, monkeypatch, ca
 def test_a_full_stdout_is_one_line_not_a_traceback(tmp_path):
     scene = write_scene(tmp_path, MINIMAL)
     with open("/dev/full", "w") as full:
-        r = subprocess.run([sys.executable, "-m", "reference.cli", "render", str(scene), "-o",
-                            str(tmp_path / "x.exr")], cwd=ROOT, stdout=full,
+        r = subprocess.run([sys.executable, "-m", "whitted.reference.cli", "render", str(scene),
+                            "-o", str(tmp_path / "x.exr")], cwd=ROOT, stdout=full,
                            stderr=subprocess.PIPE, text=True)
     assert r.returncode == 2 and len(r.stderr.strip().split("\n")) == 1, r.stderr
     assert "standard output" in r.stderr and "Traceback" not in r.stderr
@@ -615,7 +615,7 @@ def test_compare_of_an_image_smaller_than_a_block(tmp_path):
     scene raised a ValueError in the block means)."""
     import numpy as np
 
-    from reference.compare import block_mean, block_metrics, block_pixels
+    from whitted.reference.compare import block_mean, block_metrics, block_pixels
 
     a = np.arange(36, dtype=np.float32).reshape(3, 4, 3)
     assert block_mean(a).shape == (1, 1, 3) and block_pixels(a) == 12

@@ -10,8 +10,16 @@ import math
 import pytest
 from conftest import MINIMAL, ROOT, run_cli, write_scene
 
-from tracer.errors import SceneError
-from tracer.scene import Dielectric, Mirror, Rectangle, Sphere, Triangle, load_scene, parse_scene
+from whitted.tracer.errors import SceneError
+from whitted.tracer.scene import (
+    Dielectric,
+    Mirror,
+    Rectangle,
+    Sphere,
+    Triangle,
+    load_scene,
+    parse_scene,
+)
 
 # (test id, replacement applied to MINIMAL, key expected in the message, words expected)
 BAD = [

@@ -10,10 +10,10 @@ differs, so the images may differ by float32 rounding alone.
 import numpy as np
 import pytest
 
-import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
-from reference.cli import resolve_scene
-from tracer import load_scene
-from tracer.integrator import SCHEDULES, Integrator
+from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+from whitted.reference.cli import resolve_scene
+from whitted.tracer import load_scene
+from whitted.tracer.integrator import SCHEDULES, Integrator
 
 #: (scene, max_depth or None for the scene's own, Integrator options): glass (two
 #: slots), masks (a third slot straight through), thin glass, the classic model,
@@ -78,7 +78,7 @@ def test_shared_trees_in_many_chunks_are_the_renders_of_each_seed():
     samples of one): each seed's image and variance are still, bit for bit, that seed's
     own render, whatever the chunk (the last one partial here). Rows of a chunk written
     at another chunk's place, or a chunk's seeds in the wrong order, break the equality."""
-    from tracer.integrator import SEEDS_PER_LANE_SAMPLE
+    from whitted.tracer.integrator import SEEDS_PER_LANE_SAMPLE
 
     scene = load_scene(resolve_scene("emitter_in_glass")).with_overrides(size=(24, 18), spp=16)
     seeds = [3, 4, 5, 6, 7, 8]

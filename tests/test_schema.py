@@ -21,12 +21,12 @@ from hypothesis import given, settings
 from jsonschema.exceptions import best_match
 from test_fuzz import BASE, QUICK, damaged_scenes, to_toml
 
-import tracer.schema as schema_mod
-from tracer import emitters, materials
-from tracer.errors import SceneError
-from tracer.materials import diffuse, textures
-from tracer.scene import parse_scene
-from tracer.schema import scene_schema
+import whitted.tracer.schema as schema_mod
+from whitted.tracer import emitters, materials
+from whitted.tracer.errors import SceneError
+from whitted.tracer.materials import diffuse, textures
+from whitted.tracer.scene import parse_scene
+from whitted.tracer.schema import scene_schema
 
 ROOT = Path(__file__).resolve().parent.parent
 #: The built-in scenes and the scenes stored as test data (one imported from Mitsuba).

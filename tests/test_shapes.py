@@ -6,10 +6,10 @@ import tomllib
 import numpy as np
 import pytest
 
-from tracer.geometry import INVALID, Geometry
-from tracer.scene import parse_scene
-from tracer.shapes import paraboloid, polygon
-from tracer.texture import checkerboard
+from whitted.tracer.geometry import INVALID, Geometry
+from whitted.tracer.scene import parse_scene
+from whitted.tracer.shapes import paraboloid, polygon
+from whitted.tracer.texture import checkerboard
 
 STAR = [(math.cos(math.radians(90 + 36 * k)) * (1.0 if k % 2 == 0 else 0.4),
          math.sin(math.radians(90 + 36 * k)) * (1.0 if k % 2 == 0 else 0.4)) for k in range(10)]
@@ -187,8 +187,8 @@ def test_a_mesh_of_over_100000_triangles_renders_and_agrees_with_mitsuba(tmp_pat
 
     from conftest import SCENES
 
-    from reference.compare import compare_scene
-    from tracer import load_scene
+    from whitted.reference.compare import compare_scene
+    from whitted.tracer import load_scene
 
     sys.path.insert(0, str(SCENES / "meshes"))
     from generate import torus_knot, write_ply

@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from reference.compare import (
+from whitted.reference.compare import (
     EXACT_LIMITS,
     REGION_ALPHA,
     image_metrics,
@@ -42,7 +42,7 @@ from reference.compare import (
     statistical_comparison,
     z_test,
 )
-from tracer import load_scene
+from whitted.tracer import load_scene
 
 SEEDS = 4
 SLOW_SEEDS = 24
@@ -173,7 +173,7 @@ def test_float_precision_verdict_passes_rounding_and_fails_small_biases():
     # A deterministic pair of images: the tracer's render, and the same with float32
     # rounding noise (a few ulps per pixel), a 5e-4 bias over 30 % of the pixels, or a
     # 2e-3 error on 0.3 % of them.
-    from tracer.integrator import Integrator
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(SCENES / "three_lights.toml").with_overrides(size=(96, 64), spp=4)
     ref = Integrator(scene).render().image
@@ -222,7 +222,7 @@ def test_block_rule_counts_correlated_channels_at_their_true_noise():
     # One path carries all three channels: for grey noise, the channel sum's standard
     # deviation is 3 sigma, not sqrt(3) sigma. Blocks of pure noise must then exceed 3
     # standard deviations as rarely as a normal does (0.27 %), not 8 % of the time.
-    from reference.compare import BLOCK_SIGMAS, block_metrics
+    from whitted.reference.compare import BLOCK_SIGMAS, block_metrics
 
     rng = np.random.default_rng(3)
     h, w, sigma = 256, 256, 0.004

@@ -6,14 +6,14 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from reference.suite import FORMULAS, read_reference, scene_formulas, scene_kinds
+from whitted.reference.suite import FORMULAS, read_reference, scene_formulas, scene_kinds
 
 
 def test_every_registered_kind_has_its_formulas():
     # The manifest's formulas come from the scene's kinds: a kind added without its
     # entry would leave its scenes' formulas unnamed.
-    import tracer.scene as model
-    from tracer import emitters, materials
+    import whitted.tracer.scene as model
+    from whitted.tracer import emitters, materials
 
     for name in materials.REGISTRY:
         assert FORMULAS.get(("material", name)), name
@@ -24,7 +24,7 @@ def test_every_registered_kind_has_its_formulas():
 
 
 def test_the_manifest_is_derived_from_the_scene():
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     glass = load_scene(SCENES / "glass_sphere.toml")
     kinds = scene_kinds(glass)
@@ -49,7 +49,7 @@ def suite_dir(tmp_path_factory):
 
 
 def test_suite_export_writes_scenes_xml_references_and_manifest(suite_dir):
-    from reference import mitsuba
+    from whitted.reference import mitsuba
 
     manifest = json.loads((suite_dir / "manifest.json").read_text())
     names = [s["name"] for s in manifest["scenes"]]
@@ -72,8 +72,8 @@ def test_suite_export_writes_scenes_xml_references_and_manifest(suite_dir):
 
 
 def _tracer_image(name, monkeypatch=None, bug=None):
-    from tracer import load_scene
-    from tracer.integrator import Integrator
+    from whitted.tracer import load_scene
+    from whitted.tracer.integrator import Integrator
 
     scene = load_scene(SCENES / f"{name}.toml")
     if bug is None:
@@ -87,8 +87,8 @@ def test_suite_check_grades_a_folder_and_update_refuses_a_failing_run(suite_dir,
                                                                       monkeypatch):
     import drjit as dr
 
-    from tracer import fresnel
-    from tracer.imageio import write_exr, write_png
+    from whitted.tracer import fresnel
+    from whitted.tracer.imageio import write_exr, write_png
 
     def schlick_everywhere(cos_i, eta):   # Schlick's approximation where exact is asked for
         return dr.select(fresnel.snell_cos_t(cos_i, eta)[1], 1.0,
@@ -123,7 +123,7 @@ def test_suite_check_grades_a_folder_and_update_refuses_a_failing_run(suite_dir,
 
 
 def test_suite_update_stores_golden_images_when_the_run_passes(suite_dir, tmp_path):
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     images = tmp_path / "golden"
     images.mkdir()

@@ -13,23 +13,23 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from reference.check import check_image, format_run, tracer_reference
-from reference.user_image import UserImage
+from whitted.reference.check import check_image, format_run, tracer_reference
+from whitted.reference.user_image import UserImage
 
 #: The user's seed where the tracer samples lights (the reference's is 0).
 USER_SEED = 7
 
 
 def _scene(name, size):
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     return load_scene(SCENES / f"{name}.toml").with_overrides(size=size)
 
 
 def _bug_image(scene, fault_id, seed=0, noise=0.01, rng_seed=1):
-    from reference import mutants  # noqa: F401  (declares the catalog's ids)
-    from tracer import faults
-    from tracer.integrator import Integrator
+    from whitted.reference import mutants  # noqa: F401  (declares the catalog's ids)
+    from whitted.tracer import faults
+    from whitted.tracer.integrator import Integrator
 
     with faults.active(*([fault_id] if fault_id else [])):
         img = Integrator(scene, seed=seed).render().image.astype(np.float64)
@@ -45,7 +45,7 @@ def test_a_catalog_bug_fails_whitted_check_which_names_it_first(tmp_path):
     # A Fresnel bug in light seen through glass: the command fails, names the bug first
     # at strength near 1 with its formula and lecture topic, places the difference on the
     # paths through glass, and writes the suspects into check.json and check.html.
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     scene = _scene("glass_sphere", (48, 36))
     write_exr(tmp_path / "bug.exr", _bug_image(scene, "fresnel-average-amplitudes")
@@ -99,7 +99,7 @@ def test_a_correct_image_prints_no_suspects():
 
 
 def test_the_bugs_images_are_cached_and_only_bugs_the_scene_reaches_are_ranked(tmp_path):
-    from reference.suspects import rank_catalog, reached_faults
+    from whitted.reference.suspects import rank_catalog, reached_faults
 
     scene = _scene("sphere_point", (32, 24))
     reached = reached_faults(scene)
@@ -121,7 +121,7 @@ def test_the_bugs_images_are_cached_and_only_bugs_the_scene_reaches_are_ranked(t
 
 
 def test_bugs_with_the_same_image_tie_and_the_same_pattern_is_told_apart_by_strength():
-    from reference.suspects import Suspect, rank_difference
+    from whitted.reference.suspects import Suspect, rank_difference
 
     rng = np.random.default_rng(0)
     base = rng.uniform(0.2, 1, (20, 30, 3))

@@ -16,12 +16,12 @@ import sys
 import drjit as dr
 import pytest
 
-from tracer import backend
-from tracer.backend import jit
+from whitted.tracer import backend
+from whitted.tracer.backend import jit
 
 PROBE = """
 import drjit as dr
-from tracer.backend import jit
+from whitted.tracer.backend import jit
 
 
 def count_down(x):

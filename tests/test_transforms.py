@@ -3,7 +3,7 @@
 import numpy as np
 import pytest
 
-from tracer import transform as tf
+from whitted.tracer import transform as tf
 
 
 @pytest.mark.parametrize("axis,angle", [((1, 0, 0), -90), ((0, 1, 0), 35), ((1, 2, 3), 123.4)])

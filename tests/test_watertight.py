@@ -19,11 +19,11 @@ import numpy as np
 import pytest
 from test_bvh import brute_force
 
-from tracer import load_scene
-from tracer.bvh import BVH, INVALID
-from tracer.camera import generate_rays
-from tracer.integrator import Integrator
-from tracer.shapes import triangle as tri_f
+from whitted.tracer import load_scene
+from whitted.tracer.bvh import BVH, INVALID
+from whitted.tracer.camera import generate_rays
+from whitted.tracer.integrator import Integrator
+from whitted.tracer.shapes import triangle as tri_f
 
 DATA = Path(__file__).parent / "data" / "mitsuba_floating_sphere"
 RECTANGLE_OBJ = DATA / "rectangle.obj"
@@ -421,7 +421,7 @@ def floating_sphere(tmp_path, shape: str):
 
 
 def test_mitsubas_floating_sphere_scene_agrees_with_mitsuba(mi, tmp_path):
-    from reference.compare import compare_scene
+    from whitted.reference.compare import compare_scene
 
     scene = floating_sphere(tmp_path, "obj")
     result, _, _ = compare_scene(scene)

@@ -4,16 +4,16 @@ import drjit as dr
 import numpy as np
 import pytest
 
-import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
-from tracer import backend
-from tracer.backend import jit
+from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
+from whitted.tracer import backend
+from whitted.tracer.backend import jit
 
 
 @pytest.mark.parametrize("k", [1, 2, 3])
 def test_compact_keeps_each_child_in_order(k):
     """_compact against numpy: child 0's kept rays, then child 1's, ...; every field."""
     backend.use()
-    from tracer.integrator import _Batch, _compact
+    from whitted.tracer.integrator import _Batch, _compact
 
     rng = np.random.default_rng(k)
     n = 37
@@ -41,7 +41,7 @@ def test_compact_keeps_each_child_in_order(k):
 
 def test_compact_nothing_kept():
     backend.use()
-    from tracer.integrator import _Batch, _compact
+    from whitted.tracer.integrator import _Batch, _compact
 
     z = dr.zeros(jit.Array3f, 4)
     b = _Batch(z, z, z, dr.arange(jit.UInt32, 4))

@@ -10,8 +10,8 @@ import tomllib
 import numpy as np
 import pytest
 
-from tracer.integrator import Integrator
-from tracer.scene import parse_scene
+from whitted.tracer.integrator import Integrator
+from whitted.tracer.scene import parse_scene
 
 HEAD = """
 [film]
@@ -227,7 +227,7 @@ to_world = [ { scale = 5 }, { rotate = { axis = [1, 0, 0], angle = -90 } },
 def test_cost_follows_the_rays_traced_not_two_to_the_depth():
     from conftest import SCENES
 
-    from tracer import load_scene
+    from whitted.tracer import load_scene
 
     s = load_scene(SCENES / "glass_sphere.toml").with_overrides(size=(40, 30), spp=4,
                                                                 max_depth=25)

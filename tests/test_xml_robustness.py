@@ -18,7 +18,7 @@ from pathlib import Path
 
 import pytest
 
-from reference.cli import main
+from whitted.reference.cli import main
 
 SCENE = """<scene version="3.0.0">
   <default name="r" value="1"/>

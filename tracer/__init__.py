@@ -9,14 +9,14 @@ use (see :mod:`tracer.llvm`); it must therefore be imported before drjit.
 (240, 320, 3)
 """
 
-from tracer import llvm as _llvm
+from whitted.tracer import llvm as _llvm
 
 # Dr.Jit loads libLLVM when it is imported: too late to choose then. A bad
 # library already loaded is refused by tracer.backend.use() with advice.
 _llvm.configure()
 
-from tracer.errors import SceneError, UserError  # noqa: E402
-from tracer.scene import Scene, load_scene  # noqa: E402
+from whitted.tracer.errors import SceneError, UserError  # noqa: E402
+from whitted.tracer.scene import Scene, load_scene  # noqa: E402
 
 __version__ = "0.1.0"
 
@@ -27,7 +27,7 @@ def render(scene, progress=None, seed=0, lpe=None):
     ``lpe`` keeps only the light on paths matching a light-path expression such
     as ``"LDS+E"`` (Heckbert's notation, written from the light to the eye).
     """
-    from tracer.integrator import render as _render
+    from whitted.tracer.integrator import render as _render
 
     return _render(scene, progress, seed, lpe)
 

@@ -16,7 +16,7 @@ import importlib
 import os
 from types import ModuleType
 
-from tracer import llvm
+from whitted.tracer import llvm
 
 BACKENDS = ("auto", "llvm", "cuda")
 
@@ -130,7 +130,7 @@ def deferred(name: str):
     a scene is validated first and the backend, with its libLLVM
     (:mod:`tracer.llvm`), chosen after. The kinds' modules therefore reach
     Dr.Jit and the formula modules through this:
-    ``dr = deferred("drjit")``, ``fresnel = deferred("tracer.fresnel")``.
+    ``dr = deferred("drjit")``, ``fresnel = deferred("whitted.tracer.fresnel")``.
     """
     return _Deferred(name)
 

@@ -73,9 +73,9 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from tracer import backend
-from tracer.backend import any_mask, greater, jit, lesser, upload
-from tracer.shapes import triangle as tri_f
+from whitted.tracer import backend
+from whitted.tracer.backend import any_mask, greater, jit, lesser, upload
+from whitted.tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
            "sah_cost", "shared_bvh"]

@@ -46,9 +46,9 @@ import math
 import drjit as dr
 import numpy as np
 
-from tracer import faults
-from tracer.backend import jit
-from tracer.scene import Camera
+from whitted.tracer import faults
+from whitted.tracer.backend import jit
+from whitted.tracer.scene import Camera
 
 
 def frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

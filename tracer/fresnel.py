@@ -16,7 +16,7 @@ import math
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 def _sides(cos_i, eta):

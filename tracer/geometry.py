@@ -33,9 +33,9 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from tracer import backend, faults
-from tracer.backend import any_mask, jit, upload, upload_rows
-from tracer.scene import (
+from whitted.tracer import backend, faults
+from whitted.tracer.backend import any_mask, jit, upload, upload_rows
+from whitted.tracer.scene import (
     Cylinder,
     Disk,
     Instance,
@@ -46,13 +46,13 @@ from tracer.scene import (
     Sphere,
     Triangle,
 )
-from tracer.shapes import cylinder as cyl_f
-from tracer.shapes import disk as disk_f
-from tracer.shapes import paraboloid as par_f
-from tracer.shapes import polygon as poly_f
-from tracer.shapes import rectangle as rect_f
-from tracer.shapes import sphere as sphere_f
-from tracer.shapes import triangle as tri_f
+from whitted.tracer.shapes import cylinder as cyl_f
+from whitted.tracer.shapes import disk as disk_f
+from whitted.tracer.shapes import paraboloid as par_f
+from whitted.tracer.shapes import polygon as poly_f
+from whitted.tracer.shapes import rectangle as rect_f
+from whitted.tracer.shapes import sphere as sphere_f
+from whitted.tracer.shapes import triangle as tri_f
 
 INVALID = 0xFFFFFFFF
 
@@ -416,7 +416,7 @@ class _MeshBlock(_Block):
     """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
 
     def __init__(self, mesh: Mesh):
-        from tracer.bvh import shared_bvh
+        from whitted.tracer.bvh import shared_bvh
 
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
@@ -549,7 +549,7 @@ class _InstanceSetBlock(_Block):
     """
 
     def __init__(self, instances: list[Instance], child: Geometry, bounds):
-        from tracer.bvh import build_box_bvh, pack_nodes
+        from whitted.tracer.bvh import build_box_bvh, pack_nodes
 
         self.child = child
         self.n = len(instances)
@@ -591,7 +591,7 @@ class _InstanceSetBlock(_Block):
 
     @backend.syntax
     def _loop(self, o, d, t, prim, alive):
-        from tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
+        from whitted.tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
 
         n = dr.width(t)
         inv = inverse_direction(d)

@@ -51,7 +51,7 @@ from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 #: Formats by their first bytes (the magic numbers of their specifications).
 MAGIC = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"PF", "pfm"), (b"Pf", "pfm"),
@@ -156,7 +156,7 @@ def read_file(path: str | Path, header: ImageHeader) -> bytes:
 def gunzip_bounded(path: str | Path, data: bytes, bytes_per_byte: int) -> bytes:
     """The gzip stream ``data`` decompressed; refused (WHITTED_MAX_MEMORY) once its
     decompressed bytes, at ``bytes_per_byte`` of memory each, pass the limit."""
-    from tracer.limits import MAX_MEMORY, check_memory
+    from whitted.tracer.limits import MAX_MEMORY, check_memory
 
     limit = MAX_MEMORY.value() // bytes_per_byte
     try:
@@ -364,7 +364,7 @@ def check_image_file(path: str | Path, formats: tuple[str, ...] | None = None,
     overrides the reader's working memory per value in the estimate
     (:func:`tracer.limits.check_image_memory`).
     """
-    from tracer.limits import check_image_memory
+    from whitted.tracer.limits import check_image_memory
 
     header = read_header(path)
     if formats is not None and header.format not in formats:
@@ -410,7 +410,7 @@ def captured_stderr() -> Iterator[list[str]]:
 def library_message(captured: list[str], exc: BaseException | None) -> str:
     """One line from a C library's printed messages and its exception: the first
     message line (less ``<python_buffer>: ``), else the exception's text."""
-    from tracer.errors import one_line
+    from whitted.tracer.errors import one_line
 
     lines = [ln.strip() for text in captured for ln in text.splitlines() if ln.strip()]
     text = lines[0] if lines else str(exc or "").strip()

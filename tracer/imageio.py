@@ -26,7 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 FORMATS = (".exr", ".png", ".ppm")
 
@@ -240,7 +240,7 @@ def write_exr(path: str | Path, image: np.ndarray,
 
 def read_exr(path: str | Path) -> np.ndarray:
     """The R, G, B channels of an OpenEXR file as float32 (H x W x 3)."""
-    from tracer.imageheader import ImageError
+    from whitted.tracer.imageheader import ImageError
 
     channels, _ = read_exr_channels(path)
     if not {"R", "G", "B"} <= set(channels):
@@ -264,7 +264,7 @@ def read_exr_channels(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
     """
     import OpenEXR
 
-    from tracer.imageheader import (
+    from whitted.tracer.imageheader import (
         ImageError,
         captured_stderr,
         check_image_file,
@@ -300,7 +300,7 @@ def read_texture_file(path: str | Path) -> np.ndarray:
     checked before it is decoded (:func:`tracer.imageheader.check_image_file`).
     Errors are one :class:`~tracer.imageheader.ImageError` line.
     """
-    from tracer.imageheader import ImageError, check_image_file, read_file
+    from whitted.tracer.imageheader import ImageError, check_image_file, read_file
 
     suffix = Path(path).suffix.lower()
     if suffix == ".exr":
@@ -319,7 +319,7 @@ def read_texture_file(path: str | Path) -> np.ndarray:
                 raise ImageError(path, f"an 8-bit PNG is expected, got mode {im.mode}")
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, ValueError, SyntaxError, EOFError) as e:
-        from tracer.errors import one_line
+        from whitted.tracer.errors import one_line
 
         raise ImageError(path, f"unreadable PNG file ({one_line(str(e), 160)})") from None
     finally:
@@ -389,14 +389,14 @@ def read_ppm_maxval(path: str | Path) -> tuple[np.ndarray, int]:
     significant first) otherwise; P3 stores decimal numbers, which may exceed
     the maxval (minray's colours above 1).
     """
-    from tracer.imageheader import (
+    from whitted.tracer.imageheader import (
         ImageError,
         check_image_file,
         gunzip_bounded,
         ppm_fields,
         read_file,
     )
-    from tracer.limits import PPM_TEXT_BYTES_PER_BYTE, check_memory
+    from whitted.tracer.limits import PPM_TEXT_BYTES_PER_BYTE, check_memory
 
     header = check_image_file(path, ("ppm",))
     raw = read_file(path, header)

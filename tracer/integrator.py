@@ -85,14 +85,14 @@ from dataclasses import dataclass, field
 import drjit as dr
 import numpy as np
 
-from tracer import backend, faults, lights
-from tracer.backend import any_mask, jit
-from tracer.camera import generate_rays
-from tracer.emitters import area, scene_emitters
-from tracer.geometry import Geometry, Hit, spawn_offset
-from tracer.materials.base import ShadingPoint
-from tracer.materials.dispatch import SceneMaterials
-from tracer.sampling import (
+from whitted.tracer import backend, faults, lights
+from whitted.tracer.backend import any_mask, jit
+from whitted.tracer.camera import generate_rays
+from whitted.tracer.emitters import area, scene_emitters
+from whitted.tracer.geometry import Geometry, Hit, spawn_offset
+from whitted.tracer.materials.base import ShadingPoint
+from whitted.tracer.materials.dispatch import SceneMaterials
+from whitted.tracer.sampling import (
     jitter_2d,
     light_sample,
     pixel_and_sample,
@@ -100,7 +100,7 @@ from tracer.sampling import (
     pixel_seed_and_sample,
     seed32,
 )
-from tracer.scene import Scene
+from whitted.tracer.scene import Scene
 
 #: Shadow rays stop this fraction short of the light, so the light's own surface
 #: (for area lights) never counts as an occluder.
@@ -340,7 +340,7 @@ class Integrator:
                  lpe: str | None = None, min_weight: float = 0.0, offset_scale: float = 1.0,
                  schedule: str = "auto", group: int | None = None):
         backend.use()
-        from tracer.limits import check_render
+        from whitted.tracer.limits import check_render
 
         check_render(scene, moments=False)
         self.scene = scene
@@ -357,7 +357,7 @@ class Integrator:
         self.min_weight = float(min_weight)
         self.dfa = None
         if lpe is not None:
-            from tracer.lpe import ALPHABET, compile_lpe
+            from whitted.tracer.lpe import ALPHABET, compile_lpe
 
             self.dfa = compile_lpe(lpe)
             self.dfa_trans = jit.UInt32([t for row in self.dfa.transitions for t in row])
@@ -375,7 +375,7 @@ class Integrator:
         self.last_level_sees = bool(self.geo.emitters) or any(
             not e.hit_term for e in self.backgrounds)
         if chunk_samples is None:  # on a CPU, bounded for deep scenes (limits.chunk_samples)
-            from tracer.limits import chunk_samples as cpu_chunk
+            from whitted.tracer.limits import chunk_samples as cpu_chunk
 
             chunk_samples = ((1 << 24) if backend.name() == "cuda"
                              else cpu_chunk(scene.film.max_depth))

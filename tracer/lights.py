@@ -22,7 +22,7 @@ import math
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 def inverse_square(intensity, dist):
@@ -214,7 +214,7 @@ def spot_uv(x, y, z_tan):
     """Texture coordinates of a textured spot for the direction (x, y, z) in its frame,
     ``z_tan`` = z tan(cutoff): (1/2 + x / (2 z tan), 1/2 + y / (2 z tan)), the cutoff cone's
     square cross-section mapped onto the unit square (Mitsuba 3's ``spot``)."""
-    from tracer.backend import jit
+    from whitted.tracer.backend import jit
 
     u, v = 0.5 * x / z_tan, 0.5 * y / z_tan
     if faults.on("spot-uv-centred-at-zero"):

@@ -37,7 +37,7 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 _SUFFIX = {"": 1, "K": 1 << 10, "M": 1 << 20, "G": 1 << 30, "T": 1 << 40}
 
@@ -170,7 +170,7 @@ def check_depth(max_depth: int) -> None:
 
 def primitive_count(scene) -> int:
     """Primitives the tracer builds tables for: triangles of meshes, shapes, instances' copies."""
-    from tracer.scene import Instance, Mesh
+    from whitted.tracer.scene import Instance, Mesh
 
     def count(shapes) -> int:
         return sum(len(s.faces) if isinstance(s, Mesh) else 1 for s in shapes

@@ -38,7 +38,7 @@ import sys
 from dataclasses import dataclass
 from pathlib import Path
 
-from tracer import cache
+from whitted.tracer import cache
 
 #: Majors measured to work with drjit 1.5.0.
 KNOWN_GOOD_FROM = 19

@@ -31,7 +31,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 ALPHABET = "LDSE"
 SYMBOL = {c: i for i, c in enumerate(ALPHABET)}
@@ -234,7 +234,7 @@ def compile_lpe(expr: str) -> DFA:
 
     Raises :class:`LPEError` for a bad or too large expression (see the module doc).
     """
-    from tracer.limits import LPE_MAX_STATES
+    from whitted.tracer.limits import LPE_MAX_STATES
 
     max_states = LPE_MAX_STATES.value()
     start, accept, edges = _nfa(_reverse(_parse(expr)))

@@ -75,7 +75,7 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer.errors import UserError
+from whitted.tracer.errors import UserError
 
 __all__ = ["CACHE_MAX_BYTES", "CACHE_MAX_MESHES", "MeshData", "MeshError", "clear_cache",
            "compute_vertex_normals", "face_normals", "load_mesh"]
@@ -244,7 +244,7 @@ def _stat_regular(path: Path) -> os.stat_result:
 
 def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None) -> MeshData:
     """Parse the file (no cache): the format by its first bytes, then by its suffix."""
-    from tracer.limits import check_memory
+    from whitted.tracer.limits import check_memory
 
     def check(kind: str) -> None:
         try:

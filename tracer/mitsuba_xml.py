@@ -53,10 +53,10 @@ from pathlib import Path
 
 import numpy as np
 
-from tracer import transform as tf
-from tracer.errors import UserError
-from tracer.limits import MAX_INCLUDES, MAX_SCENE_BYTES, refuse
-from tracer.mitsuba_ior import IOR
+from whitted.tracer import transform as tf
+from whitted.tracer.errors import UserError
+from whitted.tracer.limits import MAX_INCLUDES, MAX_SCENE_BYTES, refuse
+from whitted.tracer.mitsuba_ior import IOR
 
 #: The longest value (an attribute, a -D value, a file name) echoed in a message.
 VALUE_SHOWN = 60
@@ -1069,7 +1069,7 @@ class _Importer:
 
 def _single_triangle(path: Path) -> list | None:
     """The three vertices of a mesh file with exactly one triangle (else None)."""
-    from tracer.meshio import MeshError, load_mesh
+    from whitted.tracer.meshio import MeshError, load_mesh
 
     try:
         if path.stat().st_size > 4096:  # a one-face mesh is a few lines

@@ -35,7 +35,7 @@ import math
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 MODELS = ("phong", "blinn-phong")
 

@@ -19,8 +19,8 @@ import hashlib
 
 import drjit as dr
 
-from tracer import faults
-from tracer.backend import jit
+from whitted.tracer import faults
+from whitted.tracer.backend import jit
 
 
 def seed32(seed: int) -> int:

@@ -28,27 +28,29 @@ from typing import Any
 
 import numpy as np
 
+from whitted.scenes import resolve as resolve_scene
+
 # The kinds that used to be defined here are re-exported ("X as X"), so that
 # ``from tracer.scene import Diffuse`` keeps working.
-from tracer import emitters as _emitters
-from tracer import materials as _materials
-from tracer import transform as tf
-from tracer.emitters import area as _area
-from tracer.emitters.area import AreaEmitter as AreaEmitter
-from tracer.emitters.base import LightModel
-from tracer.emitters.directional import DirectionalLight as DirectionalLight
-from tracer.emitters.point import PointLight as PointLight
-from tracer.emitters.spot import SpotLight as SpotLight
-from tracer.errors import SceneError, UserError
-from tracer.materials.base import MaterialModel
-from tracer.materials.dielectric import Dielectric as Dielectric
-from tracer.materials.diffuse import Diffuse as Diffuse
-from tracer.materials.mirror import Mirror as Mirror
-from tracer.materials.phong import Phong as Phong
-from tracer.materials.textures import Checkerboard as Checkerboard
-from tracer.materials.textures import Texture as Texture
-from tracer.materials.textures import parse_texture, scalar_texture
-from tracer.materials.textures import texture_max as texture_max
+from whitted.tracer import emitters as _emitters
+from whitted.tracer import materials as _materials
+from whitted.tracer import transform as tf
+from whitted.tracer.emitters import area as _area
+from whitted.tracer.emitters.area import AreaEmitter as AreaEmitter
+from whitted.tracer.emitters.base import LightModel
+from whitted.tracer.emitters.directional import DirectionalLight as DirectionalLight
+from whitted.tracer.emitters.point import PointLight as PointLight
+from whitted.tracer.emitters.spot import SpotLight as SpotLight
+from whitted.tracer.errors import SceneError, UserError
+from whitted.tracer.materials.base import MaterialModel
+from whitted.tracer.materials.dielectric import Dielectric as Dielectric
+from whitted.tracer.materials.diffuse import Diffuse as Diffuse
+from whitted.tracer.materials.mirror import Mirror as Mirror
+from whitted.tracer.materials.phong import Phong as Phong
+from whitted.tracer.materials.textures import Checkerboard as Checkerboard
+from whitted.tracer.materials.textures import Texture as Texture
+from whitted.tracer.materials.textures import parse_texture, scalar_texture
+from whitted.tracer.materials.textures import texture_max as texture_max
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]
@@ -446,7 +448,7 @@ class _Table:
     def _unknown_first(self, key: str) -> None:
         """Before saying ``key`` is missing: a key this kind of table does not know (a
         misspelling, or a key of another kind) is the likelier fault, and is named first."""
-        from tracer.schema import known_keys
+        from whitted.tracer.schema import known_keys
 
         known = known_keys(self.pattern, self.kind)
         unknown = [k for k in self.data if k not in self.used and k not in known]
@@ -747,7 +749,7 @@ def _read_scene_bytes(path: str) -> bytes:
     """The file's bytes: a regular file no larger than the limit (no FIFO, no device)."""
     import stat
 
-    from tracer.limits import MAX_SCENE_BYTES, refuse
+    from whitted.tracer.limits import MAX_SCENE_BYTES, refuse
 
     limit = MAX_SCENE_BYTES.value()
     st = os.stat(path)
@@ -784,8 +786,10 @@ def _check_nesting(path: str, data: Any) -> None:
 
 
 def load_scene(path: str | Path) -> Scene:
-    """Read and validate a TOML scene; raise :class:`SceneError` on bad input."""
-    path = str(path)
+    """Read and validate a TOML scene, given by its path or a built-in scene's name
+    (``"glass_sphere"``, :func:`whitted.scenes.resolve`); raise :class:`SceneError` on bad
+    input."""
+    path = str(resolve_scene(path))
     try:
         text = _read_scene_bytes(path).decode("utf-8")
     except FileNotFoundError:
@@ -814,7 +818,7 @@ def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
     equivalent, calling ``warn(line)`` once per kind of substitution.
     """
     if str(path).lower().endswith(".xml"):
-        from tracer.mitsuba_xml import read_xml
+        from whitted.tracer.mitsuba_xml import read_xml
 
         imp = read_xml(path, approximate)
         for line in imp.warnings:
@@ -1175,7 +1179,7 @@ def _points(t: _Table, key: str, m: np.ndarray, exactly: int | None = None) -> l
 
 def _check_polygon(t: _Table, verts: list) -> None:
     """Planar, not degenerate and simple (no edge crosses another)."""
-    from tracer.shapes.polygon import plane_frame, self_intersects
+    from whitted.tracer.shapes.polygon import plane_frame, self_intersects
 
     pts = np.asarray(verts)
     frame = plane_frame(pts)
@@ -1192,7 +1196,7 @@ def _check_polygon(t: _Table, verts: list) -> None:
 
 
 def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh:
-    from tracer.meshio import MeshError, compute_vertex_normals, load_mesh
+    from whitted.tracer.meshio import MeshError, compute_vertex_normals, load_mesh
 
     name = t.string("file")
     path = Path(name) if Path(name).is_absolute() else base / name

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from tracer import scene as _scene
+from whitted.tracer import scene as _scene
 
 #: The most runs of one parser while exploring its branches: far above what the kinds
 #: need (a shape takes 26), a guard against a parser whose branches multiply.

@@ -4,7 +4,7 @@ import math
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 def checkerboard(uv, scale, color0, color1):

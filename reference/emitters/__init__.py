@@ -13,7 +13,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from reference.emitters import (
+from whitted.reference.emitters import (
     area,
     background,
     constant,
@@ -23,8 +23,8 @@ from reference.emitters import (
     point,
     spot,
 )
-from tracer.emitters import type_of
-from tracer.errors import UserError
+from whitted.tracer.emitters import type_of
+from whitted.tracer.errors import UserError
 
 #: ``[[lights]]`` TOML ``type`` -> the module of that kind's conversions (one line per kind).
 REGISTRY: dict[str, ModuleType] = {

@@ -13,8 +13,8 @@ they shed agree, the regions' sums within |Z| 2.2).
 
 from __future__ import annotations
 
-from reference.mitsuba_tree import rgb
-from tracer.emitters.area import AreaEmitter
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.emitters.area import AreaEmitter
 
 
 def mitsuba(emitter: AreaEmitter) -> dict:

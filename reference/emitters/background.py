@@ -16,9 +16,9 @@ from __future__ import annotations
 
 import drjit as dr
 
-from reference.emitters.heckbert import constant_color
-from reference.mitsuba_tree import per_variant, rgb
-from tracer.emitters.background import Background
+from whitted.reference.emitters.heckbert import constant_color
+from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.tracer.emitters.background import Background
 
 #: the Mitsuba plugins this module registers
 PLUGINS = ("whitted_background",)

@@ -7,8 +7,8 @@ uses, so the deterministic reference hands it the tracer's own sample
 
 from __future__ import annotations
 
-from reference.mitsuba_tree import rgb
-from tracer.emitters.constant import ConstantLight
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.emitters.constant import ConstantLight
 
 
 def mitsuba(light: ConstantLight) -> dict:

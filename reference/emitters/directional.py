@@ -7,8 +7,8 @@ glass_sphere, lit by one, agree three ways).
 
 from __future__ import annotations
 
-from reference.mitsuba_tree import rgb
-from tracer.emitters.directional import DirectionalLight
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.emitters.directional import DirectionalLight
 
 
 def mitsuba(light: DirectionalLight) -> dict:

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import math
 
-from reference.mitsuba_tree import matrix
-from tracer.emitters.envmap import EnvMap
+from whitted.reference.mitsuba_tree import matrix
+from whitted.tracer.emitters.envmap import EnvMap
 
 
 def mitsuba(light: EnvMap) -> dict:

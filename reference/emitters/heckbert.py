@@ -34,8 +34,8 @@ from __future__ import annotations
 
 import drjit as dr
 
-from reference.mitsuba_tree import per_variant, rgb
-from tracer.emitters.heckbert import HeckbertSphere
+from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.tracer.emitters.heckbert import HeckbertSphere
 
 #: the Mitsuba plugins this module registers
 PLUGINS = ("whitted_heckbert",)
@@ -54,7 +54,7 @@ def register(mi) -> None:
 
 def constant_color(mi, props, name: str):
     """A constant colour parameter (an ``rgb`` texture or a list) as a Color3f."""
-    from reference.materials.phong import _color_texture
+    from whitted.reference.materials.phong import _color_texture
 
     tex = _color_texture(mi, props, name, 1.0)
     return mi.Color3f(tex.eval(dr.zeros(mi.SurfaceInteraction3f)))

@@ -11,8 +11,8 @@ from __future__ import annotations
 
 import math
 
-from reference.mitsuba_tree import rgb
-from tracer.emitters.point import PointLight
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.emitters.point import PointLight
 
 
 def mitsuba(light: PointLight) -> dict:

@@ -18,10 +18,10 @@ difference (README, "LuxCore"). A textured spot is refused.
 
 from __future__ import annotations
 
-from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import matrix, rgb
-from tracer.emitters.spot import SpotLight
-from tracer.errors import UserError
+from whitted.reference.materials.textures import texture_tree
+from whitted.reference.mitsuba_tree import matrix, rgb
+from whitted.tracer.emitters.spot import SpotLight
+from whitted.tracer.errors import UserError
 
 
 def mitsuba(light: SpotLight) -> dict:

@@ -21,7 +21,7 @@ from __future__ import annotations
 from dataclasses import replace
 from types import ModuleType
 
-from reference.materials import (
+from whitted.reference.materials import (
     classic,
     conductor,
     dielectric,
@@ -31,11 +31,11 @@ from reference.materials import (
     plastic,
     thindielectric,
 )
-from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import rgb
-from tracer.errors import UserError
-from tracer.materials import type_of
-from tracer.materials.textures import Checkerboard
+from whitted.reference.materials.textures import texture_tree
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.errors import UserError
+from whitted.tracer.materials import type_of
+from whitted.tracer.materials.textures import Checkerboard
 
 #: TOML ``type`` -> the module of that kind's conversions (one line per kind).
 REGISTRY: dict[str, ModuleType] = {

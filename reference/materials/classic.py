@@ -49,10 +49,10 @@ import math
 
 import drjit as dr
 
-from reference.materials.phong import _color_texture
-from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import per_variant
-from tracer.materials.classic import Classic
+from whitted.reference.materials.phong import _color_texture
+from whitted.reference.materials.textures import texture_tree
+from whitted.reference.mitsuba_tree import per_variant
+from whitted.tracer.materials.classic import Classic
 
 #: the Mitsuba plugins this module registers
 PLUGINS = ("whitted_classic",)

@@ -7,9 +7,9 @@ values are those Mitsuba's RGB variants compute for that name,
 
 from __future__ import annotations
 
-from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import rgb
-from tracer.materials.conductor import Conductor
+from whitted.reference.materials.textures import texture_tree
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.materials.conductor import Conductor
 
 
 def one_sided(m: Conductor) -> dict:

@@ -51,9 +51,9 @@ from __future__ import annotations
 
 import drjit as dr
 
-from reference.mitsuba_tree import per_variant
-from tracer.errors import UserError
-from tracer.materials.dielectric import Dielectric
+from whitted.reference.mitsuba_tree import per_variant
+from whitted.tracer.errors import UserError
+from whitted.tracer.materials.dielectric import Dielectric
 
 #: the Mitsuba plugins this module registers
 PLUGINS = ("whitted_schlick",)

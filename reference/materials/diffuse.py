@@ -12,9 +12,9 @@ to match).
 
 from __future__ import annotations
 
-from reference.materials.textures import texture_tree
-from tracer.errors import UserError
-from tracer.materials.diffuse import Diffuse
+from whitted.reference.materials.textures import texture_tree
+from whitted.tracer.errors import UserError
+from whitted.tracer.materials.diffuse import Diffuse
 
 
 def mitsuba(m: Diffuse) -> dict:

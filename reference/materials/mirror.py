@@ -10,9 +10,9 @@ LuxCore: ``mirror`` with ``kr`` the mirror's colour, the same single delta lobe
 
 from __future__ import annotations
 
-from reference.mitsuba_tree import rgb
-from tracer.errors import UserError
-from tracer.materials.mirror import Mirror
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.errors import UserError
+from whitted.tracer.materials.mirror import Mirror
 
 
 def mitsuba(m: Mirror) -> dict:

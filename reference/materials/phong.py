@@ -54,9 +54,9 @@ import math
 
 import drjit as dr
 
-from reference.materials.textures import texture_tree
-from reference.mitsuba_tree import per_variant, rgb
-from tracer.materials.phong import Phong
+from whitted.reference.materials.textures import texture_tree
+from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.tracer.materials.phong import Phong
 
 MODELS = ("phong", "blinn-phong")
 #: the Mitsuba plugins this module registers

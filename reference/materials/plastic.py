@@ -3,8 +3,8 @@ both indices set, wrapped in ``twosided`` unless ``two_sided = false``."""
 
 from __future__ import annotations
 
-from reference.materials.textures import texture_tree
-from tracer.materials.plastic import Plastic
+from whitted.reference.materials.textures import texture_tree
+from whitted.tracer.materials.plastic import Plastic
 
 
 def mitsuba(m: Plastic) -> dict:

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from reference.mitsuba_tree import rgb
-from tracer.materials.textures import Bitmap, Checkerboard, Texture
+from whitted.reference.mitsuba_tree import rgb
+from whitted.tracer.materials.textures import Bitmap, Checkerboard, Texture
 
 
 def texture_tree(tex: Texture) -> dict:

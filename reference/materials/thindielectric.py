@@ -3,7 +3,7 @@
 
 from __future__ import annotations
 
-from tracer.materials.thindielectric import ThinDielectric
+from whitted.tracer.materials.thindielectric import ThinDielectric
 
 
 def mitsuba(m: ThinDielectric) -> dict:

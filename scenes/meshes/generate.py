@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[2]))   # the project, for tracer
-from tracer.meshio import write_ply  # noqa: E402  (binary PLY, also used by the tests)
+from whitted.tracer.meshio import write_ply  # noqa: E402  (binary PLY, also used by the tests)
 
 
 def torus_knot(segments: int = 360, sides: int = 20, p: int = 2, q: int = 3,

@@ -44,7 +44,7 @@ if __name__ == "__main__":
     import sys
 
     sys.path.insert(0, str(Path(__file__).resolve().parents[2]))
-    from tracer.imageio import write_exr
+    from whitted.tracer.imageio import write_exr
 
     out = Path(__file__).with_name("tiles.png")
     Image.fromarray(tiles()).save(out)

@@ -17,7 +17,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.emitters import (
+from whitted.tracer.emitters import (
     area,
     background,
     constant,
@@ -27,7 +27,7 @@ from tracer.emitters import (
     point,
     spot,
 )
-from tracer.emitters.base import Emitter, LightModel
+from whitted.tracer.emitters.base import Emitter, LightModel
 
 #: ``[[lights]]`` TOML ``type`` -> the module of that kind (one line per kind).
 LIGHTS: dict[str, ModuleType] = {

@@ -24,16 +24,16 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracer import faults
-from tracer.backend import deferred, jit, upload, upload_rows
-from tracer.emitters import base
+from whitted.tracer import faults
+from whitted.tracer.backend import deferred, jit, upload, upload_rows
+from whitted.tracer.emitters import base
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-lights = deferred("tracer.lights")
-sphere_f = deferred("tracer.shapes.sphere")
+lights = deferred("whitted.tracer.lights")
+sphere_f = deferred("whitted.tracer.shapes.sphere")
 
 Color = tuple[float, float, float]
 
@@ -228,7 +228,7 @@ class _PolygonTriangles(_Triangles):
 
     @staticmethod
     def triangles(shape):
-        from tracer.shapes.polygon import ear_clip, plane_frame
+        from whitted.tracer.shapes.polygon import ear_clip, plane_frame
 
         pts = np.asarray(shape.vertices, dtype=np.float64)
         origin, u, v, _ = plane_frame(pts)

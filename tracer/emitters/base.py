@@ -48,7 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
-from tracer.backend import jit
+from whitted.tracer.backend import jit
 
 
 @dataclass(frozen=True)

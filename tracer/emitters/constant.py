@@ -15,14 +15,14 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred, jit
-from tracer.emitters import base
+from whitted.tracer.backend import deferred, jit
+from whitted.tracer.emitters import base
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-lights = deferred("tracer.lights")
+lights = deferred("whitted.tracer.lights")
 
 Color = tuple[float, float, float]
 

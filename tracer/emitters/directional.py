@@ -11,13 +11,13 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred
-from tracer.emitters import base
+from whitted.tracer.backend import deferred
+from whitted.tracer.emitters import base
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
-lights = deferred("tracer.lights")
+lights = deferred("whitted.tracer.lights")
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]

@@ -24,15 +24,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracer.backend import deferred, jit, upload_rows
-from tracer.emitters import base
+from whitted.tracer.backend import deferred, jit, upload_rows
+from whitted.tracer.emitters import base
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-lights = deferred("tracer.lights")
-texture = deferred("tracer.texture")
+lights = deferred("whitted.tracer.lights")
+texture = deferred("whitted.tracer.texture")
 
 Matrix = tuple[tuple[float, ...], ...]
 
@@ -50,8 +50,8 @@ MODEL = EnvMap
 
 
 def parse(t: _Table) -> EnvMap:
-    from tracer.materials.textures import load_bitmap
-    from tracer.scene import _as_tuple, _parse_steps
+    from whitted.tracer.materials.textures import load_bitmap
+    from whitted.tracer.scene import _as_tuple, _parse_steps
 
     # Every key is read before the file is (the schema records the keys a parser reads).
     path = (Path(t.path).parent / t.string("filename")).resolve()

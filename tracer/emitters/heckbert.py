@@ -17,10 +17,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from tracer.backend import deferred
-from tracer.emitters import base
+from whitted.tracer.backend import deferred
+from whitted.tracer.emitters import base
 
-lights = deferred("tracer.lights")
+lights = deferred("whitted.tracer.lights")
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]

@@ -19,15 +19,15 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from tracer.backend import deferred, jit
-from tracer.emitters import base
-from tracer.materials.textures import Texture, TextureTable, parse_texture
+from whitted.tracer.backend import deferred, jit
+from whitted.tracer.emitters import base
+from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-lights = deferred("tracer.lights")
+lights = deferred("whitted.tracer.lights")
 
 Vec3 = tuple[float, float, float]
 Color = tuple[float, float, float]
@@ -46,7 +46,7 @@ class SpotLight(base.LightModel):
         """The spot's frame (4 x 4, columns x, y, z = axis, position): Mitsuba's look_at from
         the position to the target, with up = +y unless the axis is within 26 degrees of it
         (then +x)."""
-        from tracer import transform as tf
+        from whitted.tracer import transform as tf
 
         a = np.asarray(self.axis)
         up = (0.0, 1.0, 0.0) if abs(a[1]) < 0.9 else (1.0, 0.0, 0.0)

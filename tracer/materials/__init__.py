@@ -20,7 +20,7 @@ from __future__ import annotations
 
 from types import ModuleType
 
-from tracer.materials import (
+from whitted.tracer.materials import (
     classic,
     conductor,
     dielectric,
@@ -30,7 +30,7 @@ from tracer.materials import (
     plastic,
     thindielectric,
 )
-from tracer.materials.base import MaterialModel
+from whitted.tracer.materials.base import MaterialModel
 
 #: TOML ``type`` -> the module of that kind (one line per kind).
 REGISTRY: dict[str, ModuleType] = {

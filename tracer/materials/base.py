@@ -45,7 +45,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from tracer.backend import deferred, jit, upload, upload_rows
+from whitted.tracer.backend import deferred, jit, upload, upload_rows
 
 dr = deferred("drjit")
 
@@ -187,8 +187,8 @@ class BSDF:
 
 def parse_ior(t, key: str, default: float) -> float:
     """An index of refraction: a positive number or one of Mitsuba's names (``tracer.ior``)."""
-    from tracer.ior import DIELECTRICS
-    from tracer.scene import _check_number, _number_schema, _range_text
+    from whitted.tracer.ior import DIELECTRICS
+    from whitted.tracer.scene import _check_number, _number_schema, _range_text
 
     number = _range_text("a number", 0, None, True, False)
     v = t.raw(key, default, f"{number} or an IOR name",

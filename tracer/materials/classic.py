@@ -63,17 +63,17 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from tracer import faults
-from tracer.backend import deferred
-from tracer.materials import base
-from tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
+from whitted.tracer import faults
+from whitted.tracer.backend import deferred
+from whitted.tracer.materials import base
+from whitted.tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.emitters.heckbert import HeckbertSphere
-    from tracer.scene import _Table
+    from whitted.tracer.emitters.heckbert import HeckbertSphere
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-fresnel = deferred("tracer.fresnel")
+fresnel = deferred("whitted.tracer.fresnel")
 
 Color = tuple[float, float, float]
 
@@ -104,8 +104,8 @@ class Classic(base.MaterialModel):
         """Heckbert's light sphere for a sphere with kl > 0 (:mod:`tracer.emitters.heckbert`)."""
         if self.kl <= 0:
             return None
-        from tracer.emitters.heckbert import HeckbertSphere
-        from tracer.scene import Sphere
+        from whitted.tracer.emitters.heckbert import HeckbertSphere
+        from whitted.tracer.scene import Sphere
 
         if not isinstance(shape, Sphere):
             raise ValueError(f'material "{self.name}" has kl > 0, which makes a light of a '

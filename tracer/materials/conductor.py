@@ -16,14 +16,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred
-from tracer.materials import base
-from tracer.materials.textures import Texture, TextureTable, parse_texture
+from whitted.tracer.backend import deferred
+from whitted.tracer.materials import base
+from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
-fresnel = deferred("tracer.fresnel")
+fresnel = deferred("whitted.tracer.fresnel")
 
 Color = tuple[float, float, float]
 
@@ -45,7 +45,7 @@ MODEL = Conductor
 
 
 def parse(t: _Table, name: str) -> Conductor:
-    from tracer.ior import CONDUCTORS
+    from whitted.tracer.ior import CONDUCTORS
 
     if t.has("material") and (t.has("eta") or t.has("k")):
         t.fail("material", "give either material or eta and k, not both")

@@ -15,12 +15,12 @@ import math
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer import faults
-from tracer.materials import base
-from tracer.materials.textures import Texture, TextureTable, parse_texture
+from whitted.tracer import faults
+from whitted.tracer.materials import base
+from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 
 @dataclass(frozen=True)

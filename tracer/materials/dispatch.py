@@ -23,11 +23,11 @@ from typing import Any
 import drjit as dr
 import numpy as np
 
-from tracer import faults
-from tracer.backend import jit, upload
-from tracer.materials import REGISTRY, type_of
-from tracer.materials.base import MaterialModel, ShadingPoint
-from tracer.materials.textures import TextureTable
+from whitted.tracer import faults
+from whitted.tracer.backend import jit, upload
+from whitted.tracer.materials import REGISTRY, type_of
+from whitted.tracer.materials.base import MaterialModel, ShadingPoint
+from whitted.tracer.materials.textures import TextureTable
 
 
 @dataclass

@@ -16,15 +16,15 @@ from __future__ import annotations
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred
-from tracer.materials import base
-from tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
+from whitted.tracer.backend import deferred
+from whitted.tracer.materials import base
+from whitted.tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-phong = deferred("tracer.phong")
+phong = deferred("whitted.tracer.phong")
 
 Color = tuple[float, float, float]
 #: The lobe's models (those of tracer.phong, which is imported only when rendering).

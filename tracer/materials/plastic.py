@@ -21,15 +21,15 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred
-from tracer.materials import base
-from tracer.materials.textures import Texture, TextureTable, parse_texture
+from whitted.tracer.backend import deferred
+from whitted.tracer.materials import base
+from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-fresnel = deferred("tracer.fresnel")
+fresnel = deferred("whitted.tracer.fresnel")
 
 
 @dataclass(frozen=True)

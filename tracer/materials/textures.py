@@ -17,14 +17,14 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from tracer.backend import deferred, jit, upload, upload_rows
-from tracer.materials.base import gather
+from whitted.tracer.backend import deferred, jit, upload, upload_rows
+from whitted.tracer.materials.base import gather
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-texture = deferred("tracer.texture")
+texture = deferred("whitted.tracer.texture")
 
 #: Bitmap wrap modes (the kernel's codes are their indices; tracer.texture.WRAP_MODES).
 WRAP_MODES = ("repeat", "mirror", "clamp")
@@ -81,8 +81,8 @@ def srgb_decode(v: np.ndarray) -> np.ndarray:
 def load_bitmap(t: _Table, key: str, path: Path, raw: bool) -> np.ndarray:
     """The texels of an image file (PNG or OpenEXR) as linear float32 RGB; one-line errors
     (the file is checked before it is decoded: :func:`tracer.imageio.read_texture_file`)."""
-    from tracer.imageheader import ImageError
-    from tracer.imageio import read_texture_file
+    from whitted.tracer.imageheader import ImageError
+    from whitted.tracer.imageio import read_texture_file
 
     if not os.path.exists(path):  # False, not an error, for a name too long
         t.fail(key, f"no such image file: {path}")
@@ -125,7 +125,7 @@ def parse_texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Textu
 
 
 def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
-    from tracer.scene import _show
+    from whitted.tracer.scene import _show
 
     what = "a positive number or [su, sv]"
     positive = {"type": "number", "exclusiveMinimum": 0}

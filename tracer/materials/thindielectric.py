@@ -14,14 +14,14 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
-from tracer.backend import deferred
-from tracer.materials import base
+from whitted.tracer.backend import deferred
+from whitted.tracer.materials import base
 
 if TYPE_CHECKING:
-    from tracer.scene import _Table
+    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
-fresnel = deferred("tracer.fresnel")
+fresnel = deferred("whitted.tracer.fresnel")
 
 
 @dataclass(frozen=True)

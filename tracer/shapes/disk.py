@@ -8,7 +8,7 @@ a^2 + b^2 <= 1 (an ellipse in world space under a non-uniform scale).
 
 import drjit as dr
 
-from tracer.shapes.rectangle import plane_t
+from whitted.tracer.shapes.rectangle import plane_t
 
 
 def intersect(o, d, center, n, u_dual, v_dual, tmax):

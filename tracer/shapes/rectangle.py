@@ -12,7 +12,7 @@ U*.U = V*.V = 1 and U*.V = V*.U = 0, so shear is handled too.
 import drjit as dr
 import numpy as np
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 def frame(center, u, v):

@@ -16,7 +16,7 @@ grad(|p - c|^2 - r^2) / 2 = p - c, divided by r.
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 def quadratic(o, d, center, radius, unit: bool = True):

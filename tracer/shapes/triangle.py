@@ -56,7 +56,7 @@ from typing import NamedTuple
 
 import drjit as dr
 
-from tracer import faults
+from whitted.tracer import faults
 
 
 class RaySpace(NamedTuple):

@@ -1,0 +1,1 @@
+"""The built-in scenes' meshes (package data; generate.py makes them)."""

@@ -1,0 +1,1 @@
+"""The built-in scenes' textures (package data; generate.py makes them)."""
