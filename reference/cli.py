@@ -983,7 +983,7 @@ def build_parser() -> argparse.ArgumentParser:
                                    "to the same picture as `whitted reference`.")
     scene_opts(e, "output .xml file (triangles go to meshes/NAME_*.obj beside it)", seed=False)
     e.add_argument("--integrator", choices=("whitted", "direct", "path"), default="whitted",
-                   help="integrator written into the XML (whitted needs `import reference` "
+                   help="integrator written into the XML (whitted needs `import whitted.reference` "
                         "before loading; direct and path are stock Mitsuba)")
     e.set_defaults(func=cmd_export)
 

@@ -467,8 +467,9 @@ def write_xml(scene: Scene, path: str | Path, integrator: str = "whitted",
 
     plugins = [name for name in plugin_names() + emitter_plugin_names()
                if any(f'type="{name}"' in line for line in body)]
-    note = ("Rendered by Mitsuba 3 after `import reference` (which registers the `whitted` "
-            "integrator), e.g. python -c \"import reference, mitsuba as mi; ...\"; or export with "
+    note = ("Rendered by Mitsuba 3 after `import whitted.reference` (which registers the "
+            "`whitted` integrator), e.g. python -c \"import whitted.reference, mitsuba as mi; "
+            "...\"; or export with "
             "the integrator option set to direct for a stock integrator (an XML comment may not "
             "hold two dashes in a row).") if integrator == "whitted" else ""
     if plugins:

@@ -79,7 +79,7 @@ def test_a_render_opens_nothing_in_the_cache_folder_but_the_probe_answers(tmp_pa
             "str(args[0]).startswith(root):\n"
             "        opened.append(str(args[0]))\n"
             "sys.addaudithook(hook)\n"
-            "from reference.cli import main\n"
+            "from whitted.reference.cli import main\n"
             "try:\n    main(sys.argv[1:])\nfinally:\n    print('OPENED', opened)\n")
     env = dict(os.environ, XDG_CACHE_HOME=str(xdg))
     r = subprocess.run([sys.executable, "-c", code, "render", str(SCENES / "mesh_knot.toml"),

@@ -57,7 +57,7 @@ def test_render_writes_exr_png_and_ppm(tmp_path):
 
 def test_render_path_never_imports_mitsuba(tmp_path):
     scene = write_scene(tmp_path, MINIMAL)
-    code = ("import sys\nfrom reference.cli import main\n"
+    code = ("import sys\nfrom whitted.reference.cli import main\n"
             f"rc = main(['render', {str(scene)!r}, '-o', {str(tmp_path / 'x.exr')!r}])\n"
             "assert rc == 0, rc\n"
             "assert 'mitsuba' not in sys.modules, 'render imported mitsuba'\n")

@@ -141,7 +141,7 @@ def test_drjit_imported_first_with_a_bad_library_is_refused_not_aborted(tmp_path
     import subprocess
     import sys
 
-    code = ("import drjit\nimport tracer\nfrom tracer import backend, llvm\n"
+    code = ("import drjit\nimport whitted.tracer\nfrom whitted.tracer import backend, llvm\n"
             "try:\n    backend.use('llvm')\nexcept llvm.LLVMUnavailable as e:\n"
             "    print(e)\n    raise SystemExit(3)\n")
     env = dict(os.environ, DRJIT_LIBLLVM_PATH=SYSTEM_BAD[0])

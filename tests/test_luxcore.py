@@ -172,10 +172,10 @@ def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
     import subprocess
     import sys
 
-    code = ("import tracer, drjit as dr\n"
-            "from tracer import load_scene\n"
-            "from reference import mitsuba\n"
-            "from reference.mitsuba_scene import load\n"
+    code = ("import whitted.tracer, drjit as dr\n"
+            "from whitted.tracer import load_scene\n"
+            "from whitted.reference import mitsuba\n"
+            "from whitted.reference.mitsuba_scene import load\n"
             f"scene = load_scene({str(SCENES / 'envmap.toml')!r})\n"
             "dr.set_thread_count(1)\n"
             "load(scene, mitsuba())\n"

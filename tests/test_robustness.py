@@ -268,7 +268,7 @@ def test_a_name_that_is_not_utf8_is_written_and_printed_escaped(tmp_path):
     folder = os.path.join(os.fsencode(tmp_path), b"\xfe")
     os.mkdir(folder)
     out = os.path.join(folder, b"\xff.exr")
-    code = ("import sys\nfrom reference.cli import main\n"
+    code = ("import sys\nfrom whitted.reference.cli import main\n"
             f"sys.exit(main(['render', {str(scene)!r}, '-o', "
             f"__import__('os').fsdecode({out!r})]))\n")
     # Outside the C locale, where Python's stdout is strict UTF-8 and would refuse to print it.

@@ -37,7 +37,7 @@ SCENE = """<scene version="3.0.0">
 </scene>
 """
 
-SERIALIZED = (Path(__file__).parent / "data" / "mitsuba_scenes" / "tests" / "serialized"
+SERIALIZED = (Path(__file__).parents[1] / "scenes" / "mitsuba-data" / "tests" / "serialized"
               / "rectangle_normals_uv.serialized")
 
 
