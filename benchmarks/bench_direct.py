@@ -54,7 +54,7 @@ def main(argv=None) -> int:
     import drjit as dr
 
     from whitted.reference import mitsuba
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
 
     mi = mitsuba()
     integ = Integrator(scene)

@@ -86,7 +86,7 @@ def main() -> None:
         m = "-"
         if not args.no_mitsuba:
             from whitted.reference import mitsuba
-            from whitted.reference.mitsuba_scene import load
+            from whitted.reference.renderers.mitsuba.scene import load
 
             mi = mitsuba()
             s = time.perf_counter()

@@ -88,7 +88,7 @@ def main(argv=None) -> int:
     from generate import torus_knot, write_obj, write_ply
 
     from whitted.reference import mitsuba
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer import backend, load_scene
     from whitted.tracer.bvh import sah_cost
     from whitted.tracer.integrator import Integrator

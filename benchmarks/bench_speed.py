@@ -207,7 +207,7 @@ def _minray_rate(size: int, depth: int, repeat: int, count: int) -> float | None
         # minray's main returns no value (K&R C), so its exit status is arbitrary
         secs, peak = timed_children([exe], repeat, check=False)
     print(f"  minray (cc -O2, one thread)  {secs:8.2f} s   {count / secs / 1e6:7.1f} M rays/s"
-          f"   peak {mb(peak)}  (its count from reference.minray.ray_count)")
+          f"   peak {mb(peak)}  (its count from reference.teaching.minray.ray_count)")
     return secs
 
 
@@ -233,7 +233,7 @@ def _kernel_figures(integ) -> None:
 
 def cmd_recursion(args) -> int:
     from whitted.reference.cli import resolve_scene
-    from whitted.reference.minray import ray_count
+    from whitted.reference.teaching.minray import ray_count
     from whitted.tracer import backend, load_scene
     from whitted.tracer.integrator import Integrator
 
@@ -318,7 +318,7 @@ def cmd_quality(args) -> int:
 
     from whitted.reference import mitsuba
     from whitted.reference.cli import resolve_scene
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer import backend, load_scene
     from whitted.tracer.integrator import Integrator
 

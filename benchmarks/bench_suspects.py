@@ -11,7 +11,7 @@ without a variance layer, or given to it with ``--variance``, as an EXR's
 variance layer gives it). The same noise on the tracer as written must
 pass the check (the control; a scene where it does not is left out and
 listed). The check then ranks the catalog's bugs that
-reach the scene (:func:`reference.suspects.rank_catalog`), and the bug's rank
+reach the scene (:func:`reference.check.suspects.rank_catalog`), and the bug's rank
 is counted:
 
 * a hit at rank 1 when it is first, or tied with the first (a tie: the two
@@ -52,9 +52,9 @@ def main(argv=None) -> int:
     import numpy as np
 
     from whitted.reference import mutants
-    from whitted.reference.check import check_image, tracer_reference
-    from whitted.reference.suspects import mutated_image, reached_faults
-    from whitted.reference.user_image import UserImage
+    from whitted.reference.check.images import UserImage
+    from whitted.reference.check.judge import check_image, tracer_reference
+    from whitted.reference.check.suspects import mutated_image, reached_faults
     from whitted.scenes import builtin_scenes
     from whitted.tracer import load_scene
 

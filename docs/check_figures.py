@@ -38,9 +38,9 @@ def main() -> None:
     import numpy as np
 
     from whitted.reference import mitsuba
-    from whitted.reference.check import judge_image, path_variance, tracer_reference
-    from whitted.reference.mitsuba_scene import load
-    from whitted.reference.user_image import UserImage, code_steps, decode
+    from whitted.reference.check.images import UserImage, code_steps, decode
+    from whitted.reference.check.judge import judge_image, path_variance, tracer_reference
+    from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer import load_scene
     from whitted.tracer.imageio import to_srgb8
     from whitted.tracer.integrator import material_ids

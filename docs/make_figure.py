@@ -15,7 +15,7 @@ from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loa
 def main() -> None:
     from PIL import Image, ImageDraw
 
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import load_scene
     from whitted.tracer.imageio import to_srgb8
 

@@ -31,7 +31,7 @@ from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loa
 def main() -> None:
     import numpy as np
 
-    from whitted.reference.compare import (
+    from whitted.reference.verdicts.compare import (
         image_metrics,
         judge,
         region_test,

@@ -18,11 +18,8 @@ def mitsuba():
     variant = backend.mitsuba_variant()
     if mi.variant() != variant:
         mi.set_variant(variant)
-    from whitted.reference import (
-        emitters,
-        integrators,  # noqa: F401  (registers the `whitted` integrator)
-        materials,
-    )
+    from whitted.reference import emitters, materials
+    from whitted.reference.renderers.mitsuba import onelobe  # noqa: F401  (registers `whitted`)
 
     # Plugins written on Mitsuba's API by material and emitter kinds (e.g. `whitted_phong`).
     if variant not in _registered:

@@ -196,7 +196,7 @@ def cmd_reference(args) -> int:
     check_render(scene, mitsuba=True)
     _note_spp(scene)
     name = _backend(args)
-    from whitted.reference.render import render_reference
+    from whitted.reference.renderers.mitsuba.render import render_reference
 
     result = render_reference(scene, args.integrator, seed=args.seed)
     check_finite(result.image, "Mitsuba's render")
@@ -208,16 +208,16 @@ def cmd_reference(args) -> int:
 
 def _reference_luxcore(args, out) -> int:
     """``whitted reference --renderer luxcore``: LuxCore's image, spp jittered samples a pixel."""
-    from whitted.reference import luxcore
+    from whitted.reference.renderers.luxcore import render as luxcore
     from whitted.tracer.errors import UserError
     from whitted.tracer.imageio import write_image
 
     luxcore.require()
     if args.integrator != "whitted":
         raise UserError("--integrator: Mitsuba's integrators only; LuxCore renders with its "
-                        "path tracer at Whitted's depths (reference/luxcore_scene.py)")
+                        "path tracer at Whitted's depths (reference/renderers/luxcore/scene.py)")
     scene = load(args)
-    from whitted.reference.luxcore_scene import describe
+    from whitted.reference.renderers.luxcore.scene import describe
 
     describe(scene)  # refuse in one line before the child starts
     _note_spp(scene)
@@ -299,7 +299,7 @@ def format_comparison(c) -> str:
 
 
 def format_three_way(t) -> str:
-    """A scene's three-way verdict (reference.luxcore_compare.ThreeWay) as text."""
+    """A scene's three-way verdict (reference.renderers.luxcore.vote.ThreeWay) as text."""
     lines = [f"three renderers at {t.size[0]}x{t.size[1]}: {t.verdict}"
              + (f" ({t.detail})" if t.detail else "")]
     for name, p in t.pairs.items():
@@ -315,9 +315,9 @@ def format_three_way(t) -> str:
 
 def _compare_luxcore(args, scene, main=None) -> int:
     """The three-way comparison of ``whitted compare --renderer luxcore|all``."""
-    from whitted.reference import luxcore
-    from whitted.reference.compare import write_json
-    from whitted.reference.luxcore_compare import compare_three
+    from whitted.reference.renderers.luxcore import render as luxcore
+    from whitted.reference.renderers.luxcore.vote import compare_three
+    from whitted.reference.verdicts.compare import write_json
     from whitted.tracer.errors import UserError
 
     luxcore.require()
@@ -337,12 +337,12 @@ def _compare_luxcore(args, scene, main=None) -> int:
 
 
 def cmd_compare(args) -> int:
-    from whitted.reference.compare import choose_test, comparable, compare_scene
+    from whitted.reference.verdicts.compare import choose_test, comparable, compare_scene
     from whitted.tracer.errors import UserError
     from whitted.tracer.limits import check_render
 
     if args.renderer != "mitsuba":
-        from whitted.reference import luxcore
+        from whitted.reference.renderers.luxcore import render as luxcore
 
         luxcore.require()   # before anything renders
     scene = load(args)
@@ -405,7 +405,7 @@ def cmd_export(args) -> int:
     from whitted.tracer.limits import check_depth
 
     check_depth(scene.film.max_depth)  # Mitsuba reads it as a 32-bit integer
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
 
     files = write_xml(scene, out, args.integrator)
     print("wrote " + ", ".join(shown(f) for f in files))
@@ -413,7 +413,7 @@ def cmd_export(args) -> int:
 
 
 def cmd_import(args) -> int:
-    from whitted.reference.importer import write_import
+    from whitted.reference.renderers.mitsuba.importer import write_import
     from whitted.tracer.errors import UserError
     from whitted.tracer.imageio import check_output_path
     from whitted.tracer.mitsuba_xml import VALUE_SHOWN
@@ -454,7 +454,7 @@ def cmd_fresnel(args) -> int:
     limits.check_memory(per_table * limits.FRESNEL_BYTES_PER_SAMPLE, "the Fresnel table")
     out = output_folder(args.output)
     _backend(args)
-    from whitted.reference.fresnel_curves import fresnel_table, write_outputs
+    from whitted.reference.teaching.fresnel_curves import fresnel_table, write_outputs
 
     table = fresnel_table(tuple(args.ior), args.step, args.samples, args.seed)
     files = write_outputs(table, out)
@@ -489,7 +489,7 @@ def format_fresnel(table) -> str:
 
 
 def cmd_report(args) -> int:
-    from whitted.reference.report import build_report, select_scenes
+    from whitted.reference.report.build import build_report, select_scenes
     from whitted.tracer.errors import UserError
 
     scenes_dir = Path(args.scenes_dir) if args.scenes_dir else SCENES_DIR
@@ -531,7 +531,7 @@ def _report_luxcore(args) -> bool:
     """Whether the report adds LuxCore's three-way verdicts: unless ``--no-luxcore``.
 
     LuxCore is optional: where it is missing, fails or runs past its time limits the
-    report goes on without it and says so ("not available", reference.report), its
+    report goes on without it and says so ("not available", reference.report.build), its
     exit status the tracer's against Mitsuba. WHITTED_REQUIRE_LUXCORE=1 (CI) makes
     LuxCore's tests fail without it (tests/test_luxcore.py), not the report.
     """
@@ -540,7 +540,7 @@ def _report_luxcore(args) -> bool:
 
 def cmd_mutants(args) -> int:
     from whitted.reference import mutants
-    from whitted.reference.report import select_scenes
+    from whitted.reference.report.build import select_scenes
     from whitted.tracer.errors import UserError
 
     if args.list:
@@ -566,7 +566,7 @@ def cmd_mutants(args) -> int:
                            log=lambda m: print(m, flush=True))
     print(mutants.format_table(result))
     if out is not None:
-        from whitted.reference.compare import write_json
+        from whitted.reference.verdicts.compare import write_json
 
         out.mkdir(parents=True, exist_ok=True)
         write_json(out / "mutants.json", result.to_json())
@@ -580,7 +580,12 @@ MAX_REPEAT = 100
 
 
 def cmd_depth_sweep(args) -> int:
-    from whitted.reference.depth_sweep import depth_sweep, explain, parse_depths, write_outputs
+    from whitted.reference.teaching.depth_sweep import (
+        depth_sweep,
+        explain,
+        parse_depths,
+        write_outputs,
+    )
     from whitted.tracer.errors import UserError
 
     depths = parse_depths(args.depths)
@@ -620,7 +625,7 @@ def cmd_paths(args) -> int:
 
     out = check_output_path(args.output, (".png",))
     scene = load(args)
-    from whitted.reference.paths import (
+    from whitted.reference.teaching.paths import (
         MAX_PIXELS,
         WANTED,
         draw,
@@ -672,7 +677,7 @@ def cmd_paths(args) -> int:
 
 
 def cmd_assignment(args) -> int:
-    from whitted.reference.depth_sweep import parse_depths
+    from whitted.reference.teaching.depth_sweep import parse_depths
     from whitted.tracer.errors import UserError
 
     depths = tuple(parse_depths(args.depths))
@@ -683,7 +688,7 @@ def cmd_assignment(args) -> int:
         raise UserError(f"--repeat: expected a positive number, got {args.repeat}")
     out = output_folder(args.output)
     _backend(args)
-    from whitted.reference.assignment import run
+    from whitted.reference.teaching.assignment import run
 
     print(f"whitted assignment: heckbert_minray at {args.size}x{args.size}, DEPTH "
           f"{', '.join(map(str, depths))} -> {out}/", flush=True)
@@ -718,7 +723,7 @@ def cmd_schema(args) -> int:
 
 def _thresholds(args):
     """OpenImageIO idiff's thresholds from the options (None where not given), checked."""
-    from whitted.reference.check import Thresholds
+    from whitted.reference.check.judge import Thresholds
     from whitted.tracer.errors import UserError
 
     th = Thresholds(**{k: getattr(args, k, None) for k in
@@ -735,8 +740,8 @@ def _thresholds(args):
 
 
 def cmd_check(args) -> int:
-    from whitted.reference.check import check_image, format_run, write_outputs
-    from whitted.reference.user_image import read_user_image
+    from whitted.reference.check.images import read_user_image
+    from whitted.reference.check.judge import check_image, format_run, write_outputs
     from whitted.tracer.errors import UserError
     from whitted.tracer.limits import check_render
 
@@ -754,13 +759,14 @@ def cmd_check(args) -> int:
     if args.mitsuba or args.spp is not None:
         check_render(scene, mitsuba=True)
     if args.mitsuba:
-        from whitted.reference.deterministic import shares_light_samples
+        from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
 
         if not shares_light_samples(scene):
             raise UserError(f"--mitsuba: an emitter of {scene.name} has no shared light "
-                            "samples (reference.deterministic.SAMPLE_MAPS), so Mitsuba's "
+                            "samples (reference.renderers.mitsuba.deterministic.SAMPLE_MAPS), "
+                            "so Mitsuba's "
                             "deterministic reference cannot render it")
-    from whitted.reference.check import OUTPUT_NAMES, refuse_in_the_way
+    from whitted.reference.check.judge import OUTPUT_NAMES, refuse_in_the_way
     from whitted.tracer.imageio import StagedFolder
 
     outdir = output_folder(args.output or Path("out") / "check" /
@@ -782,7 +788,7 @@ def cmd_check(args) -> int:
 
 
 def cmd_suite(args) -> int:
-    from whitted.reference import suite
+    from whitted.reference.check import suite
     from whitted.tracer.errors import UserError
 
     given = {"--suite": args.suite, "--update": args.update or None,
@@ -819,11 +825,11 @@ def cmd_suite(args) -> int:
     if suite_dir is not None and not suite_dir.is_dir():
         raise UserError(f"{shown(suite_dir)}: no such suite folder")
     if args.encoding is not None:
-        from whitted.reference.user_image import ENCODINGS
+        from whitted.reference.check.images import ENCODINGS
 
         if args.encoding not in ENCODINGS:
             raise UserError(f"--encoding: expected one of {', '.join(ENCODINGS)}")
-    from whitted.reference.check import refuse_in_the_way
+    from whitted.reference.check.judge import refuse_in_the_way
     from whitted.tracer.imageio import StagedFolder
 
     # Everything read and checked before any rendering: the manifest, its paths, and

@@ -12,7 +12,7 @@ with that bug.
 
 :func:`sweep` renders every built-in scene with the tracer as written and
 with each bug, and judges each image as ``whitted compare`` does
-(:mod:`reference.compare`): against the deterministic reference at float
+(:mod:`reference.verdicts.compare`): against the deterministic reference at float
 precision, against the harness's own model of a declared tracer-only part,
 and, on area-lit scenes, by the one-lobe reference's statistical verdict. A
 bug is *caught* by a scene whose verdict fails; the sweep passes when the
@@ -415,7 +415,7 @@ class Unit:
 
     def judge(self, tracer_image=None) -> dict:
         """The verdict's checks for a tracer image (the tracer renders here for z-tests)."""
-        from whitted.reference.compare import image_metrics, judge, statistical_verdict
+        from whitted.reference.verdicts.compare import image_metrics, judge, statistical_verdict
 
         if self.reference == "onelobe":
             return statistical_verdict(self.scene, self.ref, tracer_image,
@@ -427,14 +427,17 @@ class Unit:
 def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
     """The verdicts ``whitted compare`` gives ``scene``, each with its reference rendered once.
 
-    As :func:`reference.compare.compare_scene`: the scene with declared
+    As :func:`reference.verdicts.compare.compare_scene`: the scene with declared
     tracer-only parts replaced is judged against the deterministic reference;
     a declared part with a harness model (Schlick) is judged as it is against
     the deterministic reference with that model; an area-lit scene also gets
     the one-lobe reference's statistical verdict at the second opinion's size.
     Each unit's clean verdict, and which switches its render reached, are recorded.
     """
-    from whitted.reference.compare import (
+    from whitted.reference.materials import has_tracer_only_models
+    from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
+    from whitted.reference.renderers.mitsuba.render import deterministic_image, render_reference
+    from whitted.reference.verdicts.compare import (
         choose_test,
         comparable,
         regions_of,
@@ -442,9 +445,6 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         shared_tracer_image,
         ztest_passes,
     )
-    from whitted.reference.deterministic import shares_light_samples
-    from whitted.reference.materials import has_tracer_only_models
-    from whitted.reference.render import deterministic_image, render_reference
     from whitted.tracer.integrator import material_ids
 
     full = scene
@@ -560,7 +560,7 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     """Judge the tracer as written and with each bug on every scene (module docstring).
 
     ``between()``, when given, is called before each scene and each bug's judgement
-    (``whitted report``: reference.luxcore.SharedCores.poll)."""
+    (``whitted report``: reference.renderers.luxcore.render.SharedCores.poll)."""
     from whitted.tracer import load_scene
 
     start = time.perf_counter()
@@ -610,7 +610,9 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
 
 def _judge_mutant(m: Mutant, units: list[Unit]):
     """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not."""
-    from whitted.reference.compare import shared_tracer_image  # a new render with the bug on
+    from whitted.reference.verdicts.compare import (
+        shared_tracer_image,  # a new render with the bug on
+    )
 
     seen_by_any = False
     for u in units:

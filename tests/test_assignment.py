@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from whitted.reference.depth_sweep import parse_depths
-from whitted.reference.paths import pick_pixels, project, ray_trees
+from whitted.reference.teaching.depth_sweep import parse_depths
+from whitted.reference.teaching.paths import pick_pixels, project, ray_trees
 from whitted.tracer import load_scene
 from whitted.tracer.errors import UserError
 
@@ -138,7 +138,7 @@ ASSIGNMENT_FILES = {"heckbert_depth1.png", "heckbert_depth2.png", "heckbert_dept
 def test_the_assignment_command_writes_the_assignments_files(tmp_path):
     from PIL import Image
 
-    from whitted.reference.minray import ray_count
+    from whitted.reference.teaching.minray import ray_count
     from whitted.tracer.imageio import ppm_values
     from whitted.tracer.integrator import Integrator
 
@@ -177,8 +177,8 @@ def test_the_assignment_command_writes_the_assignments_files(tmp_path):
 
 
 def test_the_light_paths_figure_names_all_six_paths(tmp_path):
-    from whitted.reference.assignment import light_paths, scene_at
-    from whitted.reference.paths import example_paths, pick_pixels
+    from whitted.reference.teaching.assignment import light_paths, scene_at
+    from whitted.reference.teaching.paths import example_paths, pick_pixels
     from whitted.tracer.imageio import ppm_values
     from whitted.tracer.integrator import Integrator
 

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCENES
 
-from whitted.reference import suspects
+from whitted.reference.check import suspects
 from whitted.tracer import llvm
 
 SIZE = (4, 3)

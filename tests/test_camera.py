@@ -58,7 +58,7 @@ def test_orthographic_rays_are_parallel(jit):
 
 @pytest.mark.parametrize("kind", ["perspective", "orthographic"])
 def test_camera_rays_match_mitsubas_sensor(jit, mi, kind):
-    from whitted.reference.mitsuba_scene import sensor_tree, to_dict
+    from whitted.reference.renderers.mitsuba.scene import sensor_tree, to_dict
     from whitted.tracer.scene import Film, Scene
 
     cam = Camera(kind, (0.3, 1.5, 4), (0.1, 0.4, 0), (0, 1, 0), fov=50, width=3)

@@ -13,14 +13,14 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from whitted.reference.check import (
+from whitted.reference.check.images import UserImage, code_steps, decode, read_user_image
+from whitted.reference.check.judge import (
     Thresholds,
     judge_image,
     local_variance,
     rounding_bias_bound,
     tracer_reference,
 )
-from whitted.reference.user_image import UserImage, code_steps, decode, read_user_image
 
 #: Glass and a mirror before emitting panels: Mitsuba's path tracer converges to Whitted's
 #: image there.
@@ -41,7 +41,7 @@ def _scene(name, size=None):
 def _mitsuba_path(scene, seed, spp=64):
     """Mitsuba's own path tracer on the converted scene, samples jittered in their strata."""
     from whitted.reference import mitsuba
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
 
     mi = mitsuba()
     ms = load(scene, mi, "path", jitter=True)
@@ -346,7 +346,7 @@ def test_an_image_with_a_formula_bug_fails_from_the_command_line(tmp_path, monke
 
 
 def test_a_glass_formula_bug_is_placed_in_the_light_seen_through_glass(monkeypatch):
-    from whitted.reference.check import decomposition
+    from whitted.reference.check.judge import decomposition
     from whitted.tracer import fresnel
     from whitted.tracer.integrator import material_ids
 
@@ -365,7 +365,7 @@ def test_a_glass_formula_bug_is_placed_in_the_light_seen_through_glass(monkeypat
 def test_suspects_are_ranked_with_the_injected_bug_first(monkeypatch):
     # Three formula bugs switched on by monkeypatching; an image made with each (plus
     # noise of 1 % of the image's mean) must name that bug first, at a strength near 1.
-    from whitted.reference.suspects import Suspect, format_suspects, rank_suspects
+    from whitted.reference.check.suspects import Suspect, format_suspects, rank_suspects
     from whitted.tracer import fresnel, lights
 
     scene = _scene("glass_sphere", (48, 36))

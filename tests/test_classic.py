@@ -349,8 +349,8 @@ def test_the_glow_and_the_background_must_be_hit_terms_on_mitsubas_side_too(mi, 
     # model's DEPTH excludes, and the comparison fails.
     from conftest import SCENES
 
-    from whitted.reference.compare import compare_scene
     from whitted.reference.emitters import background, heckbert
+    from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import load_scene
 
     scene = load_scene(SCENES / "heckbert_minray.toml")

@@ -1,6 +1,6 @@
 """Every built-in scene rendered by the tracer and by Mitsuba, compared.
 
-The criteria are those of :mod:`reference.compare` (derived there): against
+The criteria are those of :mod:`reference.verdicts.compare` (derived there): against
 the deterministic reference, which follows both lobes of every mirror and
 glass and samples area lights at the tracer's own points, every scene must
 agree to float precision (median relative difference below 1e-5, 99.9 % of
@@ -18,7 +18,9 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from whitted.reference.compare import (
+from whitted.reference.renderers.mitsuba.render import render_reference
+from whitted.reference.report.build import quick_overrides
+from whitted.reference.verdicts.compare import (
     EXACT_LIMITS,
     choose_test,
     compare_scene,
@@ -26,8 +28,6 @@ from whitted.reference.compare import (
     judge,
     statistical_comparison,
 )
-from whitted.reference.render import render_reference
-from whitted.reference.report import quick_overrides
 from whitted.tracer import load_scene
 from whitted.tracer.scene import Dielectric
 
@@ -176,7 +176,7 @@ def test_direct_with_centred_strata_picks_lights_unevenly():
 
 
 def test_exported_xml_renders_the_same_picture_on_mitsuba(mi, tmp_path):
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
 
     scene = load_scene(SCENES / "ortho_transforms.toml").with_overrides(size=(80, 60), spp=16)
     files = write_xml(scene, tmp_path / "scene.xml")
@@ -191,7 +191,7 @@ def test_exported_xml_renders_the_same_picture_on_mitsuba(mi, tmp_path):
 def test_exported_xml_of_the_second_lectures_shapes_renders_the_same(mi, tmp_path, name):
     # Groups and instances, polygons and paraboloids as meshes (obj with uvs and normals),
     # mesh files, cylinders, disks, checkerboards and the Phong BSDF, through XML.
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
 
     scene = load_scene(SCENES / f"{name}.toml").with_overrides(size=(64, 48), spp=4)
     files = write_xml(scene, tmp_path / "scene.xml")
@@ -205,7 +205,7 @@ def test_exported_xml_of_the_second_lectures_shapes_renders_the_same(mi, tmp_pat
 
 
 def test_exported_xml_with_stock_direct_integrator_renders_on_plain_mitsuba(mi, tmp_path):
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
 
     scene = load_scene(SCENES / "sphere_point.toml").with_overrides(size=(64, 48), spp=16)
     xml = write_xml(scene, tmp_path / "scene.xml", integrator="direct")[0]

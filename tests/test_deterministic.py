@@ -3,10 +3,10 @@
 Each delta lobe is taken from Mitsuba's plugin through a ``BSDFContext`` that
 keeps that lobe alone; these tests check what that returns against the
 Fresnel equations from the literature (Hecht, "Optics", 4.6.2, evaluated in
-float64 by :func:`reference.fresnel_curves.exact64`), against the tracer's
+float64 by :func:`reference.teaching.fresnel_curves.exact64`), against the tracer's
 weights, and, through whole renders, against closed forms. Area lights are
 sampled at the tracer's own points: the sample maps of
-:data:`reference.deterministic.SAMPLE_MAPS` must give the same point and the
+:data:`reference.renderers.mitsuba.deterministic.SAMPLE_MAPS` must give the same point and the
 same L / pdf on both sides.
 """
 
@@ -18,9 +18,9 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from whitted.reference.compare import compare_scene
-from whitted.reference.deterministic import SAMPLE_MAPS, render_deterministic
-from whitted.reference.fresnel_curves import exact64, float32_tolerance
+from whitted.reference.renderers.mitsuba.deterministic import SAMPLE_MAPS, render_deterministic
+from whitted.reference.teaching.fresnel_curves import exact64, float32_tolerance
+from whitted.reference.verdicts.compare import compare_scene
 from whitted.tracer import load_scene
 from whitted.tracer.integrator import Integrator
 from whitted.tracer.scene import Disk, Rectangle, Sphere, Triangle, parse_scene
@@ -205,7 +205,7 @@ def _emitter_scene(kind):
 
 def _points(scene, mi, sample_map, n=4096, seed=1):
     """(wi, value) of the tracer's area light and of Mitsuba's emitter for the same samples."""
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer.backend import jit
     from whitted.tracer.emitters import area
 
@@ -289,7 +289,7 @@ def test_reference_follows_as_many_rays_per_level_as_the_tracer(name, untraced):
 def test_a_light_without_a_sample_map_is_judged_by_the_one_lobe_reference(monkeypatch):
     # A future emitting shape whose warp the reference cannot match: the comparison
     # falls back to the statistical verdict and says why, rather than failing.
-    import whitted.reference.deterministic as det
+    import whitted.reference.renderers.mitsuba.deterministic as det
 
     monkeypatch.setattr(det, "SAMPLE_MAPS", {k: v for k, v in SAMPLE_MAPS.items()
                                              if k is not Disk})
@@ -299,7 +299,7 @@ def test_a_light_without_a_sample_map_is_judged_by_the_one_lobe_reference(monkey
 
 
 def test_levels_larger_than_a_chunk_are_split_without_changing_the_image(monkeypatch):
-    import whitted.reference.deterministic as det
+    import whitted.reference.renderers.mitsuba.deterministic as det
 
     scene = load_scene(SCENES / "whitted_mix.toml").with_overrides(size=(48, 32), spp=4)
     whole = render_deterministic(scene)
@@ -356,7 +356,7 @@ def test_schlick_model_gives_schlicks_reflectance_and_snells_direction(mi, jit, 
     w_t, pdf_t, wo_t = _one_lobe(mi, schlick, cos_i, mi.BSDFFlags.DeltaTransmission)
     _, _, wo_exact = _one_lobe(mi, exact, cos_i, mi.BSDFFlags.DeltaTransmission)
     # Near the critical angle cos_t = sqrt(1 - sin^2) magnifies float32 rounding: the same
-    # bound as for the exact equations (reference.fresnel_curves.float32_tolerance).
+    # bound as for the exact equations (reference.teaching.fresnel_curves.float32_tolerance).
     tol = float32_tolerance(cos_i, ior)
     assert np.all(pdf_r == 1) and np.all(np.abs(w_r - r64) <= tol)
     assert np.allclose(wo_r[2], cos_i, atol=1e-6)

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from whitted.reference.fresnel_curves import exact64, float32_tolerance
+from whitted.reference.teaching.fresnel_curves import exact64, float32_tolerance
 from whitted.tracer import fresnel
 
 
@@ -188,7 +188,7 @@ def test_plugin_curve_check_passes_mitsubas_dielectric_and_fails_a_shifted_ior(m
     angle inside the glass by about a degree, where R jumps from below 1 to 1, far
     outside any interval (at ior 1, where R = 0, any reflection at all fails); at the quick
     table's 20,000 draws each ior must fail."""
-    from whitted.reference import fresnel_curves as fc
+    from whitted.reference.teaching import fresnel_curves as fc
 
     table = fc.fresnel_table(fc.DEFAULT_IORS, step=1.0, samples=20_000)
     assert table.passed

@@ -117,7 +117,7 @@ def no_decoders(monkeypatch):
     import OpenEXR
     from PIL import Image
 
-    import whitted.reference.user_image as user_image
+    import whitted.reference.check.images as user_image
 
     def called(*a, **k):
         raise AssertionError("a decoder ran on an image that should have been refused")
@@ -184,7 +184,7 @@ def _huge_headers(tmp_path):
 
 def test_check_refuses_images_whose_headers_claim_a_huge_size_before_decoding(tmp_path,
                                                                             no_decoders):
-    from whitted.reference.user_image import read_user_image
+    from whitted.reference.check.images import read_user_image
 
     for name in _huge_headers(tmp_path):
         with pytest.raises(UserError, match="WHITTED_MAX_MEMORY") as e:
@@ -197,7 +197,7 @@ def test_check_refuses_images_whose_headers_claim_a_huge_size_before_decoding(tm
 
 
 def test_the_image_limit_follows_whitted_max_memory(tmp_path, monkeypatch):
-    from whitted.reference.user_image import read_user_image
+    from whitted.reference.check.images import read_user_image
     from whitted.tracer.imageio import write_png
 
     write_png(tmp_path / "a.png", np.full((60, 80, 3), 0.5, np.float32))

@@ -14,7 +14,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from whitted.reference.importer import (
+from whitted.reference.renderers.mitsuba.importer import (
     agreement,
     dict_to_xml,
     disagreements,
@@ -223,7 +223,7 @@ def test_gaussian_filter_matches_mitsubas_at_the_strata_centres(mi):
     brightest pixel. 1e-4 of it leaves room, and is 1000 times below what a wrong
     stddev, a missing cut-off shift or a box filter changes (1e-2 to 1e-1).
     """
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer.integrator import render
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(48, 36),
@@ -265,7 +265,7 @@ def test_gaussian_splat_is_the_same_in_chunks_and_at_every_run():
 def test_camera_to_world_fov_axis_and_principal_point_match_mitsuba():
     """A mirrored to_world, a vertical fov and a principal point offset, judged by the
     deterministic reference at float precision (exact-strata)."""
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import transform as tf
 
     scene = load_scene(ROOT / "scenes" / "sphere_point.toml").with_overrides(size=(40, 30),
@@ -281,7 +281,7 @@ def test_camera_to_world_fov_axis_and_principal_point_match_mitsuba():
 
 def test_cube_matches_mitsubas_cube():
     """Mitsuba's cube against the tracer's, lit from above by an area light."""
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     data = {"film": {"width": 40, "height": 40, "spp": 4, "max_depth": 2},
             "camera": {"origin": [0, 0.5, 4], "target": [0, 0, 0], "fov": 40},
@@ -432,8 +432,8 @@ def test_export_then_import_gives_the_same_scene(path, tmp_path):
     the tessellated limits where the export writes a paraboloid as a mesh. Tracer-only
     parts (Schlick's Fresnel, the Phong ambient term) have no Mitsuba counterpart and are
     not exported, so the scene comes back as its comparable form (compare.comparable)."""
-    from whitted.reference.compare import comparable, image_metrics, judge
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
+    from whitted.reference.verdicts.compare import comparable, image_metrics, judge
     from whitted.tracer.integrator import render
 
     if path.stem in NOT_ROUND_TRIP:
@@ -494,7 +494,7 @@ def test_exported_obj_texture_coordinates_are_mitsubas_after_its_flip(mi, tmp_pa
     """`whitted export` writes meshes as OBJ files, whose v Mitsuba's obj plugin flips (as
     whitted's reader does): the file holds 1 - v, so that Mitsuba loading the XML sees the
     texture coordinates the tracer uses (the textured floor polygon of `textured`)."""
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
     from whitted.tracer.meshio import load_mesh
 
     scene = load_scene(ROOT / "scenes" / "textured.toml")
@@ -521,8 +521,8 @@ def test_textured_opacity_round_trips_through_mitsuba_xml(tmp_path):
     here, and the export against Mitsuba's render in test_new_kinds.py."""
     from test_new_kinds import _mask_scene
 
-    from whitted.reference.compare import image_metrics, judge
-    from whitted.reference.mitsuba_scene import write_xml
+    from whitted.reference.renderers.mitsuba.scene import write_xml
+    from whitted.reference.verdicts.compare import image_metrics, judge
     from whitted.tracer.integrator import render
 
     scene = _mask_scene(tmp_path)

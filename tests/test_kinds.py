@@ -235,8 +235,8 @@ def test_a_light_at_infinity_is_seen_by_escaping_rays_and_sampled_at_surfaces(ji
     # its seeds pooled, unlike a scene lit by delta lights only.
     import tomllib
 
-    from whitted.reference.compare import choose_test
-    from whitted.reference.deterministic import shares_light_samples
+    from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
+    from whitted.reference.verdicts.compare import choose_test
 
     assert parse_scene(tomllib.loads(text)).samples_lights()
     # No shared sample points for it: the one-lobe reference and its z-test judge it.

@@ -40,7 +40,7 @@ def test_spot_falloff_is_linear_in_angle_between_beam_width_and_cutoff(jit):
 
 def test_spot_falloff_matches_mitsubas_spot_emitter(jit, mi):
     # Mitsuba's spot light, pointing down -y from (0, 4, 0): compare I falloff / r^2.
-    from whitted.reference.mitsuba_scene import emitter_tree, to_dict
+    from whitted.reference.renderers.mitsuba.scene import emitter_tree, to_dict
     from whitted.tracer.scene import SpotLight
 
     spot = SpotLight((0, 4, 0), (0, 0, 0), (5, 5, 5), cutoff_angle=30, beam_width=12)

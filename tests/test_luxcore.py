@@ -22,7 +22,7 @@ DATA = Path(__file__).resolve().parent / "data" / "luxcore"
 
 @pytest.fixture(scope="module")
 def luxcore():
-    from whitted.reference import luxcore as lx
+    from whitted.reference.renderers.luxcore import render as lx
 
     if not lx.available():
         if os.environ.get("WHITTED_REQUIRE_LUXCORE") == "1":
@@ -66,14 +66,14 @@ def test_kinds_without_a_luxcore_conversion_refuse_in_one_line(monkeypatch):
     ("phong_lobes", "phong: no LuxCore equivalent"),
 ])
 def test_scenes_that_do_not_map_are_refused(name, message):
-    from whitted.reference.luxcore_scene import describe
+    from whitted.reference.renderers.luxcore.scene import describe
 
     with pytest.raises(UserError, match=message):
         describe(load_scene(SCENES / f"{name}.toml"))
 
 
 def test_field_of_view_goes_to_the_longer_side():
-    from whitted.reference.luxcore_scene import describe
+    from whitted.reference.renderers.luxcore.scene import describe
 
     scene = load_scene(SCENES / "sphere_point.toml")
     wide = describe(scene.with_overrides(size=(80, 40))).props
@@ -85,7 +85,7 @@ def test_field_of_view_goes_to_the_longer_side():
 
 
 def test_tessellated_sphere_stays_within_its_chord_bound():
-    from whitted.reference.luxcore_scene import TESSELLATION, sphere_mesh
+    from whitted.reference.renderers.luxcore.scene import TESSELLATION, sphere_mesh
     from whitted.tracer.scene import Sphere
 
     s = Sphere((1.0, -2.0, 0.5), 0.7, None)
@@ -111,8 +111,8 @@ def test_passes_become_pixel_means_with_their_noise():
     films whose sub-pixels all differ (a wrong grouping of rows or columns fails)."""
     from types import SimpleNamespace
 
-    from whitted.reference.luxcore import _result
-    from whitted.reference.luxcore_runner import pass_moments
+    from whitted.reference.renderers.luxcore.render import _result
+    from whitted.reference.renderers.luxcore.runner import pass_moments
 
     k, h, w, p = 3, 4, 5, 3
     rng = np.random.default_rng(7)
@@ -135,7 +135,7 @@ def test_passes_become_pixel_means_with_their_noise():
 def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
     import drjit as dr
 
-    from whitted.reference.luxcore import SharedCores
+    from whitted.reference.renderers.luxcore.render import SharedCores
 
     class Job:
         alive = True
@@ -167,7 +167,7 @@ def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
 def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
     """SharedCores leaves Dr.Jit one thread during the report's sweep, and Mitsuba
     3.9.1's parser never returns from reading an EXR map on a pool of one thread:
-    reference.mitsuba_scene.load gives the pool two threads for the load. Run in a
+    reference.renderers.mitsuba.scene.load gives the pool two threads for the load. Run in a
     child with a time limit, as the bug is a hang (without the two threads: killed)."""
     import subprocess
     import sys
@@ -175,7 +175,7 @@ def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
     code = ("import whitted.tracer, drjit as dr\n"
             "from whitted.tracer import load_scene\n"
             "from whitted.reference import mitsuba\n"
-            "from whitted.reference.mitsuba_scene import load\n"
+            "from whitted.reference.renderers.mitsuba.scene import load\n"
             f"scene = load_scene({str(SCENES / 'envmap.toml')!r})\n"
             "dr.set_thread_count(1)\n"
             "load(scene, mitsuba())\n"
@@ -192,7 +192,7 @@ def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
 
 def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
     from whitted.reference import cli
-    from whitted.reference import luxcore as lx
+    from whitted.reference.renderers.luxcore import render as lx
 
     monkeypatch.setattr(lx, "available", lambda: False)
     rc = cli.main(["reference", "sphere_point", "-o", str(tmp_path / "x.exr"),
@@ -252,12 +252,12 @@ def test_spot_light_profile_is_pbrt_falloff_over_cos(luxcore):
 def test_three_renderers_agree_on_specular_scenes(luxcore):
     """Direct light and mirror / glass chains: the tracer, Mitsuba and LuxCore agree.
 
-    Each pair by the statistical verdict (reference/luxcore_compare.py) at the quick
+    Each pair by the statistical verdict (reference/renderers/luxcore/vote.py) at the quick
     sizes, in one LuxCore child; a wrong light gain, a camera one row off or the
     glass's indices swapped in the conversion makes LuxCore the odd one out.
     """
-    from whitted.reference.luxcore_compare import compare_three
-    from whitted.reference.report import quick_overrides
+    from whitted.reference.renderers.luxcore.vote import compare_three
+    from whitted.reference.report.build import quick_overrides
 
     names = ["glass_sphere", "tir_prisms", "whitted_mix"]
     threes = compare_three([quick_overrides(load_scene(SCENES / f"{n}.toml")) for n in names],
@@ -268,7 +268,7 @@ def test_three_renderers_agree_on_specular_scenes(luxcore):
 
 
 def test_area_lights_with_mirrors_are_not_compared(luxcore):
-    from whitted.reference.luxcore_compare import compare_three
+    from whitted.reference.renderers.luxcore.vote import compare_three
 
     [t] = compare_three([load_scene(SCENES / "area_lights.toml")], quick=True)
     assert t.verdict == "not compared" and "caustics" in t.detail
@@ -291,7 +291,7 @@ def test_report_shows_the_vote_and_keeps_the_tracers_exit_status(luxcore, tmp_pa
 
     spot_floor: LuxCore's spot profile differs (test above), and the vote names it.
     """
-    from whitted.reference.report import build_report
+    from whitted.reference.report.build import build_report
 
     report = build_report(tmp_path, [SCENES / "spot_floor.toml"], quick=True,
                           log=lambda *_: None, fresnel=False, luxcore=True)
@@ -308,7 +308,7 @@ def test_block_allowance_is_the_binomial_quantile_of_noise():
     family-wise 1e-3: checked against the binomial tail computed here directly."""
     from math import comb, erf, sqrt
 
-    from whitted.reference.luxcore_compare import blocks_allowed
+    from whitted.reference.renderers.luxcore.vote import blocks_allowed
 
     p = 1 - erf(3 / sqrt(2))
     def tail(n, j):  # P(count > j); terms beyond j + 40 are below 1e-60 here

@@ -1008,7 +1008,8 @@ def test_a_damaged_mesh_file_loads_as_a_usable_mesh_or_fails_in_one_line_long(
 
 @pytest.mark.parametrize("with_normals", [True, False])
 def test_written_ply_reads_back_here_and_in_mitsuba(tmp_path, mi, with_normals):
-    # tracer.meshio.write_ply is how LuxCore gets its meshes (reference/luxcore.py): what
+    # tracer.meshio.write_ply is how LuxCore gets its meshes
+    # (reference/renderers/luxcore/render.py): what
     # it writes must be the mesh given, as float32, to this reader and to another one.
     from whitted.tracer.meshio import write_ply as write_mesh
 

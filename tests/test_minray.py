@@ -5,7 +5,7 @@ and 256 x 256 pixels (SOURCE.md says how they were made). The tracer must
 print the same numbers: at least 99.5 % of the values equal or one step of
 255 apart (float32 against minray's double precision rounds a value near
 k + 1/2 either way), and every value further apart explained
-(:func:`reference.minray.explain`): it must come out as minray's number
+(:func:`reference.teaching.minray.explain`): it must come out as minray's number
 when the tracer's ray offset (rays leave surfaces 1500 float32 ulps of
 1 + max |p| off, Mitsuba's RayEpsilon, about 8e-4 here, where minray starts
 on the surface in double precision) is made 16 or 2 ulps, i.e. where that
@@ -23,7 +23,7 @@ import numpy as np
 import pytest
 from conftest import ROOT, SCENES, run_cli
 
-from whitted.reference.minray import agreement, explain, ray_count, summary
+from whitted.reference.teaching.minray import agreement, explain, ray_count, summary
 from whitted.tracer import load_scene
 from whitted.tracer.imageio import ppm_values, read_ppm, write_ppm
 

@@ -18,9 +18,9 @@ import pytest
 from conftest import ROOT, SCENES
 
 from whitted.reference import cli, mutants
-from whitted.reference.compare import image_metrics, judge
-from whitted.reference.deterministic import DeterministicReference
-from whitted.reference.report import _mutants_html, _mutants_markdown
+from whitted.reference.renderers.mitsuba.deterministic import DeterministicReference
+from whitted.reference.report.build import _mutants_html, _mutants_markdown
+from whitted.reference.verdicts.compare import image_metrics, judge
 from whitted.tracer import faults, load_scene
 from whitted.tracer.integrator import Integrator
 

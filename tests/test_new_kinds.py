@@ -40,7 +40,7 @@ def test_named_indices_are_mitsubas(mi):
 
 
 def test_conductor_fresnel_matches_mitsuba_within_float32_rounding(mi):
-    from whitted.reference.fresnel_curves import conductor_curves
+    from whitted.reference.teaching.fresnel_curves import conductor_curves
 
     rows = conductor_curves(mi, step=1.0)
     assert rows and all(r["pass"] for r in rows), [r for r in rows if not r["pass"]]
@@ -90,10 +90,10 @@ def test_diffuse_fresnel_reflectance_fit_is_mitsubas(mi, jit):
 
 def test_area_lights_on_a_mesh_a_cube_a_polygon_and_a_cylinder_agree_with_mitsuba(tmp_path):
     # Mitsuba samples these emitters its own way (no shared light samples), so the
-    # one-lobe reference judges them by the z-test of reference.compare (Sidak alpha
+    # one-lobe reference judges them by the z-test of reference.verdicts.compare (Sidak alpha
     # 0.01 per pixel, >= 99.75 % passing; regions within alpha 0.001), the tracer's
     # image the mean of 16 seeds.
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import load_scene
 
     scene = load_scene(Path(__file__).parent / "data" / "shape_lights.toml")
@@ -167,7 +167,7 @@ def _bitmap_scene(tmp_path, wrap="repeat"):
 
 @pytest.mark.parametrize("wrap", ["repeat", "mirror", "clamp"])
 def test_bitmap_textures_agree_with_mitsuba_at_float_precision(tmp_path, wrap):
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     scene = _bitmap_scene(tmp_path, wrap)
     result, tracer_img, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
@@ -178,7 +178,7 @@ def test_bitmap_textures_agree_with_mitsuba_at_float_precision(tmp_path, wrap):
 
 def test_bitmap_texture_rows_read_from_the_top_as_mitsuba_does(tmp_path):
     # The same comparison fails with v measured from the bottom (the catalog's bug).
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     scene = _bitmap_scene(tmp_path)
     with faults.active("bitmap-v-flipped"):
@@ -282,7 +282,7 @@ def test_textured_opacity_agrees_with_mitsuba_at_float_precision(tmp_path):
     # The deterministic reference follows the mask's null lobe with Mitsuba's own
     # BSDF.sample at the same uv: agreement to float32 rounding (the median relative
     # difference of the bitmap test above) is expected.
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     scene = _mask_scene(tmp_path)
     result, tracer_img, _ = compare_scene(scene, tmp_path / "out", second_opinion=False)
@@ -295,7 +295,7 @@ def test_textured_opacity_agrees_with_mitsuba_at_float_precision(tmp_path):
 def test_textured_opacity_looked_up_wrongly_is_caught(tmp_path, fault):
     # The opacity is read through the same texture lookup as a reflectance: with the
     # checkerboard at (v, u) or the bitmap's rows from the bottom the comparison fails.
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     scene = _mask_scene(tmp_path)
     with faults.active(fault):

@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 from whitted.reference import cli
-from whitted.reference import luxcore as lx
+from whitted.reference.renderers.luxcore import render as lx
 from whitted.tracer import load_scene
 from whitted.tracer.errors import UserError
 
@@ -112,7 +112,7 @@ def test_time_limits_follow_the_work_and_the_variable(monkeypatch):
 
 
 class _FakeLuxCore:
-    """pyluxcore's few calls that reference.luxcore_runner.run_job makes; a pass is done
+    """pyluxcore's few calls that reference.renderers.luxcore.runner.run_job makes; a pass is done
     after ``wall`` seconds of sleep (no CPU time) and ``cpu`` seconds of spinning."""
 
     def __init__(self, wall: float, cpu: float):
@@ -178,7 +178,7 @@ def test_a_pass_is_limited_by_its_cpu_time_not_by_the_wall_clock(tmp_path, capsy
     """A pass that waits 1 s for a core (here: sleeps) uses no CPU time and is within a
     0.3 s limit; one that spins 0.5 s is not. At nice 19 beside a busy machine a pass
     may wait minutes, which a wall-clock limit took for LuxCore being slow."""
-    from whitted.reference.luxcore_runner import run_job
+    from whitted.reference.renderers.luxcore.runner import run_job
 
     run_job(_FakeLuxCore(wall=1.0, cpu=0.0), _job(tmp_path, 0.3))
     with np.load(tmp_path / "job0.out.npz") as out:

@@ -3,7 +3,7 @@
 import numpy as np
 from conftest import SCENES
 
-from whitted.reference.render import render_reference
+from whitted.reference.renderers.mitsuba.render import render_reference
 from whitted.tracer import load_scene
 
 

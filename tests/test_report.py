@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from whitted.reference.report import build_report, select_scenes
+from whitted.reference.report.build import build_report, select_scenes
 
 
 def test_quick_report_writes_html_markdown_and_json(tmp_path):
@@ -61,7 +61,7 @@ def _uses_exact_fresnel(path: Path) -> bool:
     Fresnel equations (a declared Schlick is judged with them too, see compare.comparable),
     or a thin dielectric or a plastic, whose weights are made of them; the classic model's
     fixed weights have no Fresnel term, a conductor's is the complex one."""
-    from whitted.reference.compare import comparable
+    from whitted.reference.verdicts.compare import comparable
     from whitted.tracer import load_scene
     from whitted.tracer.materials import plastic, thindielectric
     from whitted.tracer.scene import Dielectric
@@ -370,7 +370,7 @@ def test_heat_map_colours_follow_the_log_scale(tmp_path):
     32 x 32, the most, for an image this small)."""
     from PIL import Image
 
-    from whitted.reference.compare import _inferno_lut, heat_map
+    from whitted.reference.verdicts.compare import _inferno_lut, heat_map
 
     heat_map(np.array([[1e-8, 1e-4, 1.0, 10.0]]), tmp_path / "d.png")
     img = np.asarray(Image.open(tmp_path / "d.png").convert("RGB"))

@@ -222,7 +222,7 @@ def test_an_image_that_overflows_float32_is_refused_not_written(tmp_path):
 
 
 def test_metrics_json_is_strict_json_even_for_infinite_metrics(tmp_path):
-    from whitted.reference.compare import write_json
+    from whitted.reference.verdicts.compare import write_json
 
     write_json(tmp_path / "m.json", {"a": math.inf, "b": [math.nan, 1.0], "c": {"d": -math.inf}})
 
@@ -543,7 +543,7 @@ def test_a_hierarchy_of_mesh_instances_renders_as_the_instances_one_by_one(jit):
 
 
 def test_many_instances_convert_to_mitsuba(mi):
-    from whitted.reference.mitsuba_scene import load
+    from whitted.reference.renderers.mitsuba.scene import load
 
     scene = _instances(1000)
     t0 = time.perf_counter()
@@ -615,7 +615,7 @@ def test_compare_of_an_image_smaller_than_a_block(tmp_path):
     scene raised a ValueError in the block means)."""
     import numpy as np
 
-    from whitted.reference.compare import block_mean, block_metrics, block_pixels
+    from whitted.reference.verdicts.compare import block_mean, block_metrics, block_pixels
 
     a = np.arange(36, dtype=np.float32).reshape(3, 4, 3)
     assert block_mean(a).shape == (1, 1, 3) and block_pixels(a) == 12

@@ -187,7 +187,7 @@ def test_a_mesh_of_over_100000_triangles_renders_and_agrees_with_mitsuba(tmp_pat
 
     from conftest import SCENES
 
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import load_scene
 
     sys.path.insert(0, str(SCENES / "meshes"))

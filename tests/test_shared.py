@@ -60,7 +60,7 @@ def test_the_sweep_judges_alike_with_the_comparisons_results_shared(name):
     opinion (one-lobe reference, 16 pooled tracer seeds), glass_sphere the
     deterministic verdict only; the bugs include a shared one (blind to the
     deterministic reference) and one of each scene's kind."""
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     path = SCENES / f"{name}.toml"
     bugs = mutants.get(["light-sample-same-uv", "lambert-no-cosine", "area-pdf-rectangle",

@@ -1,6 +1,6 @@
 """The verdicts' false-alarm rates and powers, measured on seeds.
 
-Each rule of :mod:`reference.compare` states how often it fails a correct
+Each rule of :mod:`reference.verdicts.compare` states how often it fails a correct
 tracer (alpha) and what it sees (power). Here a correct tracer is judged
 against the one-lobe reference on independent seeds (the reference's passes,
 and the tracer's own seeds where it samples area lights), and known errors
@@ -33,7 +33,7 @@ import numpy as np
 import pytest
 from conftest import SCENES
 
-from whitted.reference.compare import (
+from whitted.reference.verdicts.compare import (
     EXACT_LIMITS,
     REGION_ALPHA,
     image_metrics,
@@ -222,7 +222,7 @@ def test_block_rule_counts_correlated_channels_at_their_true_noise():
     # One path carries all three channels: for grey noise, the channel sum's standard
     # deviation is 3 sigma, not sqrt(3) sigma. Blocks of pure noise must then exceed 3
     # standard deviations as rarely as a normal does (0.27 %), not 8 % of the time.
-    from whitted.reference.compare import BLOCK_SIGMAS, block_metrics
+    from whitted.reference.verdicts.compare import BLOCK_SIGMAS, block_metrics
 
     rng = np.random.default_rng(3)
     h, w, sigma = 256, 256, 0.004

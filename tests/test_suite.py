@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from whitted.reference.suite import FORMULAS, read_reference, scene_formulas, scene_kinds
+from whitted.reference.check.suite import FORMULAS, read_reference, scene_formulas, scene_kinds
 
 
 def test_every_registered_kind_has_its_formulas():

@@ -18,15 +18,15 @@ import numpy as np
 import pytest
 from conftest import MINIMAL, run_cli
 
+from whitted.reference.check.suite import MAX_MANIFEST_NESTING, safe_member
 from whitted.reference.cli import main
-from whitted.reference.suite import MAX_MANIFEST_NESTING, safe_member
 from whitted.tracer.errors import UserError
 
 
 @pytest.fixture(scope="module")
 def golden(tmp_path_factory):
     """A one-scene suite of an 8x6 scene, exported, and an image that passes against it."""
-    from whitted.reference import suite
+    from whitted.reference.check import suite
     from whitted.tracer.imageio import read_exr, write_exr
 
     base = tmp_path_factory.mktemp("safety")
@@ -203,7 +203,7 @@ def test_a_fifo_in_the_suite_is_refused_without_waiting(work, fifo):
 ])
 def test_a_bad_stored_reference_is_one_line_before_any_rendering(work, capsys, monkeypatch,
                                                                  content, words):
-    from whitted.reference import suite as suite_module
+    from whitted.reference.check import suite as suite_module
     from whitted.tracer.imageio import write_exr
 
     suite, images, _ = work
@@ -219,7 +219,7 @@ def test_a_bad_stored_reference_is_one_line_before_any_rendering(work, capsys, m
     def no_rendering(*a, **k):
         raise AssertionError("rendered before the suite was checked")
 
-    monkeypatch.setattr("whitted.reference.check.check_image", no_rendering)
+    monkeypatch.setattr("whitted.reference.check.judge.check_image", no_rendering)
     monkeypatch.setattr(suite_module, "find_image", no_rendering)
     rc, _, err = _whitted(capsys, "suite", "check", images, "--suite", suite)
     _refused(rc, err, "tiny", words)
@@ -240,7 +240,7 @@ def test_update_into_a_suite_it_cannot_write_is_refused_before_rendering(work, c
     def no_rendering(*a, **k):
         raise AssertionError("rendered before the targets were checked")
 
-    monkeypatch.setattr("whitted.reference.check.check_image", no_rendering)
+    monkeypatch.setattr("whitted.reference.check.judge.check_image", no_rendering)
     before = _snapshot(suite.parent)
     rc, _, err = _whitted(capsys, "suite", "check", images, "--suite", suite, "--update")
     _refused(rc, err, "tiny.png", "is a folder")
@@ -251,8 +251,8 @@ def test_update_into_a_suite_it_cannot_write_is_refused_before_rendering(work, c
 @pytest.mark.parametrize("target, fault", [
     ("whitted.tracer.imageio.write_png", OSError(errno.EROFS, "Read-only file system", "x.png")),
     ("whitted.tracer.imageio.write_png", KeyboardInterrupt()),
-    ("whitted.reference.suite.suite_page", OSError(errno.ENOSPC, "No space left on device")),
-    ("whitted.reference.suite.suite_page", KeyboardInterrupt()),
+    ("whitted.reference.check.suite.suite_page", OSError(errno.ENOSPC, "No space left on device")),
+    ("whitted.reference.check.suite.suite_page", KeyboardInterrupt()),
 ])
 def test_suite_check_that_fails_while_writing_leaves_nothing(work, capsys, monkeypatch,
                                                              target, fault):
@@ -291,7 +291,7 @@ def test_suite_update_that_passes_writes_everything_and_no_temporary(work, capsy
 @pytest.mark.parametrize("existing", [False, True])
 def test_check_that_fails_while_writing_leaves_nothing(golden, tmp_path, capsys, monkeypatch,
                                                        fault, existing):
-    import whitted.reference.check as check
+    import whitted.reference.check.judge as check
 
     out = tmp_path / "out"
     if existing:

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 from conftest import SCENES, run_cli
 
-from whitted.reference.check import check_image, format_run, tracer_reference
-from whitted.reference.user_image import UserImage
+from whitted.reference.check.images import UserImage
+from whitted.reference.check.judge import check_image, format_run, tracer_reference
 
 #: The user's seed where the tracer samples lights (the reference's is 0).
 USER_SEED = 7
@@ -99,7 +99,7 @@ def test_a_correct_image_prints_no_suspects():
 
 
 def test_the_bugs_images_are_cached_and_only_bugs_the_scene_reaches_are_ranked(tmp_path):
-    from whitted.reference.suspects import rank_catalog, reached_faults
+    from whitted.reference.check.suspects import rank_catalog, reached_faults
 
     scene = _scene("sphere_point", (32, 24))
     reached = reached_faults(scene)
@@ -121,7 +121,7 @@ def test_the_bugs_images_are_cached_and_only_bugs_the_scene_reaches_are_ranked(t
 
 
 def test_bugs_with_the_same_image_tie_and_the_same_pattern_is_told_apart_by_strength():
-    from whitted.reference.suspects import Suspect, rank_difference
+    from whitted.reference.check.suspects import Suspect, rank_difference
 
     rng = np.random.default_rng(0)
     base = rng.uniform(0.2, 1, (20, 30, 3))

@@ -421,7 +421,7 @@ def floating_sphere(tmp_path, shape: str):
 
 
 def test_mitsubas_floating_sphere_scene_agrees_with_mitsuba(mi, tmp_path):
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     scene = floating_sphere(tmp_path, "obj")
     result, _, _ = compare_scene(scene)

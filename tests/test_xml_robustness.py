@@ -1,7 +1,7 @@
 """Hostile Mitsuba XML scenes: every command exits 0, or 2 with one line and nothing written.
 
 One test per class of failure of the XML reader (tracer/mitsuba_xml.py) and of
-``whitted import`` (reference/importer.py): values that raised tracebacks,
+``whitted import`` (reference/renderers/mitsuba/importer.py): values that raised tracebacks,
 inputs that hung (an include bomb, FIFOs), inputs that read gigabytes
 (/dev/zero, includes beyond WHITTED_MAX_SCENE_BYTES), files named by the scene
 (symbolic links followed, regular files only), partial output, long values

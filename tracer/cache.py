@@ -2,7 +2,7 @@
 
 whitted keeps two caches on disk, both data, never code: the answers of the
 libLLVM probe (:mod:`tracer.llvm`, one JSON file) and the scenes' images with
-a formula bug (:mod:`reference.suspects`, .npy files). They live under
+a formula bug (:mod:`reference.check.suspects`, .npy files). They live under
 ``$XDG_CACHE_HOME/whitted`` (``~/.cache/whitted``; the XDG Base Directory
 Specification), in folders this module makes 0700, with files written 0600
 through a temporary file and a rename (whole or absent, also with processes

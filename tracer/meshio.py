@@ -135,7 +135,7 @@ def write_ply(path: str | Path, vertices: np.ndarray, faces: np.ndarray,
     """Write a triangle mesh as a binary little-endian PLY: float32 ``x y z`` (and ``nx ny
     nz`` where ``normals`` are given) per vertex, a ``vertex_indices`` list (uchar count,
     int32 indices) per face; the layout :func:`load_mesh` reads back and LuxCore's reader
-    takes (reference/luxcore.py hands LuxCore its meshes this way, and
+    takes (reference/renderers/luxcore/render.py hands LuxCore its meshes this way, and
     scenes/meshes/generate.py writes the built-in knot)."""
     v = np.asarray(vertices, dtype=np.float64).reshape(-1, 3)
     f = np.asarray(faces).reshape(-1, 3)

@@ -2,8 +2,8 @@
 
 ``reference/emitters/<kind>.py`` sits beside ``tracer/emitters/<kind>.py`` and
 holds ``mitsuba(light) -> dict`` (the Mitsuba 3 emitter as a plugin tree,
-:mod:`reference.mitsuba_tree`) and ``luxcore(light) -> dict`` (LuxCore's light
-properties, :mod:`reference.luxcore_scene`; a kind without one is refused in
+:mod:`reference.renderers.mitsuba.tree`) and ``luxcore(light) -> dict`` (LuxCore's light
+properties, :mod:`reference.renderers.luxcore.scene`; a kind without one is refused in
 one line, "<kind>: no LuxCore equivalent"); :mod:`reference.emitters.area` converts area
 emitters on shapes. Adding a ``[[lights]]`` kind is one module here and one
 line in :data:`REGISTRY` (``docs/extending.md``).

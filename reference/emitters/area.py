@@ -13,7 +13,7 @@ they shed agree, the regions' sums within |Z| 2.2).
 
 from __future__ import annotations
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.emitters.area import AreaEmitter
 
 

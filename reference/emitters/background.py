@@ -8,7 +8,8 @@ hit nothing evaluate) whose ``eval`` is the radiance and whose
 ``sample_direction`` returns weight 0 with pdf 0, so no integrator lights a
 point with it. It is a hit term (``hit_term = True``, see
 :mod:`tracer.emitters.base`): both of the harness's references count it
-only for rays that would still be shaded (:mod:`reference.shading`), as minray's trace returns its
+only for rays that would still be shaded (:mod:`reference.renderers.mitsuba.shading`), as
+minray's trace returns its
 ambient colour for a ray that misses, at DEPTH calls and no deeper.
 """
 
@@ -17,7 +18,7 @@ from __future__ import annotations
 import drjit as dr
 
 from whitted.reference.emitters.heckbert import constant_color
-from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.reference.renderers.mitsuba.tree import per_variant, rgb
 from whitted.tracer.emitters.background import Background
 
 #: the Mitsuba plugins this module registers

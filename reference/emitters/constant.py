@@ -7,7 +7,7 @@ uses, so the deterministic reference hands it the tracer's own sample
 
 from __future__ import annotations
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.emitters.constant import ConstantLight
 
 

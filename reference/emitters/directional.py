@@ -7,7 +7,7 @@ glass_sphere, lit by one, agree three ways).
 
 from __future__ import annotations
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.emitters.directional import DirectionalLight
 
 

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 
-from whitted.reference.mitsuba_tree import matrix
+from whitted.reference.renderers.mitsuba.tree import matrix
 from whitted.tracer.emitters.envmap import EnvMap
 
 

@@ -24,7 +24,7 @@ minray light:
 Both are hit terms in the classic model (:mod:`tracer.emitters.base`): both
 of the harness's references count the glow of an emitter that has
 ``hit_term = True`` only where they would still shade the hit (depth <
-max_depth; :mod:`reference.shading`), as the tracer counts the classic
+max_depth; :mod:`reference.renderers.mitsuba.shading`), as the tracer counts the classic
 material's emission. Mitsuba's ``path`` integrator does not know hit terms
 (it counts the glow at the last segment too) and also reaches the glow
 through diffuse bounces.
@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import drjit as dr
 
-from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.reference.renderers.mitsuba.tree import per_variant, rgb
 from whitted.tracer.emitters.heckbert import HeckbertSphere
 
 #: the Mitsuba plugins this module registers
@@ -67,7 +67,7 @@ def _define(mi):
     class HeckbertSphereLight(mi.Emitter):
         """minray's light sphere: lit towards its centre, no falloff; glows (module docstring)."""
 
-        #: the glow is a hit term (reference/integrators.py)
+        #: the glow is a hit term (reference/renderers/mitsuba/onelobe.py)
         hit_term = True
 
         def __init__(self, props: mi.Properties):

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import math
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.emitters.point import PointLight
 
 

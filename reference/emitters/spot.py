@@ -19,7 +19,7 @@ difference (README, "LuxCore"). A textured spot is refused.
 from __future__ import annotations
 
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.mitsuba_tree import matrix, rgb
+from whitted.reference.renderers.mitsuba.tree import matrix, rgb
 from whitted.tracer.emitters.spot import SpotLight
 from whitted.tracer.errors import UserError
 

@@ -4,14 +4,14 @@
 and holds
 
 * ``mitsuba(material) -> dict``: the Mitsuba 3 BSDF as a plugin tree
-  (:mod:`reference.mitsuba_tree`), with the same meaning as the tracer's
+  (:mod:`reference.renderers.mitsuba.tree`), with the same meaning as the tracer's
   (Mitsuba's defaults that differ from a Whitted set-up overridden);
 * optionally ``register(mi)`` and ``PLUGINS``: BSDFs written on Mitsuba's API
   (``whitted_phong``), registered by :func:`reference.mitsuba`.
 
 A second renderer's conversion is one more function per module:
 ``luxcore(material) -> dict``, LuxCore's material properties
-(:mod:`reference.luxcore_scene`), reached through :func:`convert`; a kind
+(:mod:`reference.renderers.luxcore.scene`), reached through :func:`convert`; a kind
 without one is refused in one line, "<kind>: no LuxCore equivalent". Adding a kind is one
 module here and one line in :data:`REGISTRY` (``docs/extending.md``).
 """
@@ -32,7 +32,7 @@ from whitted.reference.materials import (
     thindielectric,
 )
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.errors import UserError
 from whitted.tracer.materials import type_of
 from whitted.tracer.materials.textures import Checkerboard

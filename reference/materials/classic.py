@@ -51,7 +51,7 @@ import drjit as dr
 
 from whitted.reference.materials.phong import _color_texture
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.mitsuba_tree import per_variant
+from whitted.reference.renderers.mitsuba.tree import per_variant
 from whitted.tracer.materials.classic import Classic
 
 #: the Mitsuba plugins this module registers

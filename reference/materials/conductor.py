@@ -8,7 +8,7 @@ values are those Mitsuba's RGB variants compute for that name,
 from __future__ import annotations
 
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.materials.conductor import Conductor
 
 

@@ -9,7 +9,7 @@ Mitsuba has no Schlick dielectric, so for a declared ``"schlick"`` the
 harness also has a model of its own, ``whitted_schlick``
 (:func:`mitsuba_model`): a BSDF written in Python on Mitsuba's API from the
 formulas, not from :mod:`tracer.fresnel`, against which the tracer's
-Schlick renders are judged as they are (``reference.compare``). In
+Schlick renders are judged as they are (``reference.verdicts.compare``). In
 Mitsuba's local frame (normal +z, ``si.wi`` towards the viewer, pointing
 away from the surface) it has two delta components, on both sides:
 
@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import drjit as dr
 
-from whitted.reference.mitsuba_tree import per_variant
+from whitted.reference.renderers.mitsuba.tree import per_variant
 from whitted.tracer.errors import UserError
 from whitted.tracer.materials.dielectric import Dielectric
 

@@ -10,7 +10,7 @@ LuxCore: ``mirror`` with ``kr`` the mirror's colour, the same single delta lobe
 
 from __future__ import annotations
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.errors import UserError
 from whitted.tracer.materials.mirror import Mirror
 

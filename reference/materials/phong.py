@@ -55,7 +55,7 @@ import math
 import drjit as dr
 
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.mitsuba_tree import per_variant, rgb
+from whitted.reference.renderers.mitsuba.tree import per_variant, rgb
 from whitted.tracer.materials.phong import Phong
 
 MODELS = ("phong", "blinn-phong")

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from whitted.reference.mitsuba_tree import rgb
+from whitted.reference.renderers.mitsuba.tree import rgb
 from whitted.tracer.materials.textures import Bitmap, Checkerboard, Texture
 
 

@@ -34,7 +34,7 @@ classic                   ``whitted_classic`` (reference/materials/classic.py)
 classic with kl > 0       + ``whitted_heckbert`` on the sphere (reference/emitters/heckbert.py)
 background                ``whitted_background`` (reference/emitters/background.py)
 camera pixel_offset       ``principal_point_offset_x/y`` (perspective; orthographic: a shift)
-integrator                ``whitted`` (reference/integrators.py)
+integrator                ``whitted`` (reference/renderers/mitsuba/onelobe.py)
 ========================  ===================================================
 
 Materials and lights are converted by their kinds' modules in
@@ -59,7 +59,7 @@ from whitted.reference.emitters import emitter_tree as emitter_tree
 from whitted.reference.materials import bsdf_tree as bsdf_tree
 from whitted.reference.materials import plugin_names
 from whitted.reference.materials.textures import texture_tree as texture_tree
-from whitted.reference.mitsuba_tree import matrix as _matrix
+from whitted.reference.renderers.mitsuba.tree import matrix as _matrix
 from whitted.tracer import transform as tf
 from whitted.tracer.scene import (
     Cube,
@@ -321,7 +321,7 @@ def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False,
     if threads >= 2:
         return mi.load_dict(tree)
     # Mitsuba 3.9.1's parser never returns from reading an EXR file (scenes/envmap.toml's
-    # map) on a Dr.Jit pool of one thread, which reference.luxcore.SharedCores leaves
+    # map) on a Dr.Jit pool of one thread, which renderers.luxcore.render.SharedCores leaves
     # during the report's sweep (and a one-core machine by default): two for the load.
     dr.set_thread_count(2)
     try:

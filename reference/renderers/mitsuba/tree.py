@@ -2,7 +2,7 @@
 
 A plugin is ``{"type": ..., key: value | nested plugin}``. Values are tagged
 tuples so that one tree serves both ``mi.load_dict`` and the XML writer
-(:mod:`reference.mitsuba_scene`): ``("rgb", (r, g, b))``, ``("point", (x, y, z))``,
+(:mod:`reference.renderers.mitsuba.scene`): ``("rgb", (r, g, b))``, ``("point", (x, y, z))``,
 ``("vector", ...)``, ``("matrix", 4x4)``, ``("uvscale", (su, sv))``,
 ``("float", x)``, ``("integer", n)``, ``("boolean", b)``, ``("string", s)``.
 The conversions of the material and emitter kinds (``reference/materials/``,

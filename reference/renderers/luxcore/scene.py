@@ -42,10 +42,10 @@ Pixel positions. Every LuxCore sampler jitters inside the pixel, so
 LuxCore's pixel is the mean of radiance over the pixel's square (filter
 ``NONE``), while the tracer and Mitsuba put their samples at the centres of
 an s x s grid of strata, a midpoint rule for the same mean. The comparison
-(:mod:`reference.luxcore_compare`) renders those two sides with many strata
+(:mod:`reference.renderers.luxcore.vote`) renders those two sides with many strata
 so that both estimate the same integral. ``subsamples`` k renders the film k
 times larger on each side, k x k film pixels per image pixel
-(:mod:`reference.luxcore` averages them).
+(:mod:`reference.renderers.luxcore.render` averages them).
 
 The perspective and orthographic cameras map film row y to raster row
 filmHeight - y - 1, one row off after the image is flipped: the screen
@@ -62,7 +62,7 @@ import numpy as np
 from whitted.reference.emitters import area as area_conv
 from whitted.reference.emitters import convert as convert_light
 from whitted.reference.materials import convert as convert_material
-from whitted.reference.mitsuba_scene import paraboloid_mesh, polygon_mesh
+from whitted.reference.renderers.mitsuba.scene import paraboloid_mesh, polygon_mesh
 from whitted.tracer import transform as tf
 from whitted.tracer.errors import UserError
 from whitted.tracer.scene import (
@@ -318,7 +318,7 @@ def describe(scene: Scene, subsamples: int = 1) -> Description:
     desc = Description(width=film.width, height=film.height, subsamples=subsamples,
                        max_depth=film.max_depth)
     if scene.tracer_only:
-        from whitted.reference.compare import comparable
+        from whitted.reference.verdicts.compare import comparable
 
         scene = comparable(scene)
     p = desc.props

@@ -20,7 +20,7 @@ text file called ``x.png`` is "not an image" rather than a broken PNG.
 
 Quantisation. Every stored value stands for a cell of values that round to
 it; :class:`UserImage` records the width of that cell in linear units
-(``step``), from which :mod:`reference.check` takes the quantisation noise
+(``step``), from which :mod:`reference.check.judge` takes the quantisation noise
 (a uniform error over the cell: standard deviation step / sqrt(12),
 Sheppard 1898; Widrow and Kollar, "Quantization Noise", 2008, ch. 4) and
 the bound on what rounding can add up to where the image has no noise of

@@ -287,7 +287,7 @@ def _serialized_converter(folder: Path, stem: str, created: list | None = None):
 
     def convert(source: Path, index: int) -> Path:
         from whitted.reference import mitsuba
-        from whitted.reference.mitsuba_scene import _write_obj
+        from whitted.reference.renderers.mitsuba.scene import _write_obj
         from whitted.tracer.imageio import _atomic_write
 
         check_serialized(source, index)
@@ -471,7 +471,7 @@ def render_original(source, integrator: str = "path", spp: int = 64, passes: int
     (mean image H x W x 3, luminance of that mean H x W, variance of the luminance
     mean H x W): from the per-sample second moment, (E[Y^2] - E[Y]^2) / (spp passes).
     With a filter wider than a pixel, a pixel gathers more than spp samples, so this
-    overestimates the variance (rule 1 of :class:`reference.compare.Noise`).
+    overestimates the variance (rule 1 of :class:`reference.verdicts.compare.Noise`).
     """
     from whitted.reference import mitsuba
 
@@ -512,13 +512,13 @@ def render_imported(scene, seeds: int = 8):
 def agreement(test_y, test_var, ref_y, ref_var) -> dict:
     """Does the tracer agree with Mitsuba within the noise of both? (luminance images)
 
-    Per pixel, the two-sided z-test of :func:`reference.compare.z_test` (Sidak-
+    Per pixel, the two-sided z-test of :func:`reference.verdicts.compare.z_test` (Sidak-
     corrected over the pixels, at least 99.75 % passing: the project's statistical
     verdict); over the whole image, the difference of the two mean luminances against
     its standard error (the per-pixel variances summed, pixels being independent),
     which sees a bias too small for any one pixel.
     """
-    from whitted.reference.compare import z_test
+    from whitted.reference.verdicts.compare import z_test
 
     zt = z_test(test_y[..., None].astype(np.float32), ref_y[..., None].astype(np.float32),
                 ref_var[..., None], test_var[..., None])

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from whitted.reference import mitsuba
-from whitted.reference.mitsuba_scene import load
+from whitted.reference.renderers.mitsuba.scene import load
 from whitted.reference.shared import reused
 from whitted.tracer.scene import Scene
 
@@ -17,11 +17,12 @@ INTEGRATORS = ("whitted", "direct", "path", "deterministic")
 
 def deterministic_image(scene: Scene, seed: int = 0, models: bool = False,
                         renderer=None) -> np.ndarray:
-    """The deterministic reference's image (:mod:`reference.deterministic`; ``models``:
+    """The deterministic reference's image
+    (:mod:`reference.renderers.mitsuba.deterministic`; ``models``:
     the harness's own models of the scene's tracer-only parts), shared as
     :mod:`reference.shared` says. ``renderer``: the DeterministicReference of these
     arguments to render it with, where the caller renders with it again."""
-    from whitted.reference.deterministic import DeterministicReference
+    from whitted.reference.renderers.mitsuba.deterministic import DeterministicReference
 
     def make():
         ref = renderer or DeterministicReference(scene, seed, models=models)
@@ -71,7 +72,7 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
     per-sample second moment overestimates wherever radiance varies across a
     pixel.
 
-    ``integrator = "deterministic"`` renders :mod:`reference.deterministic`
+    ``integrator = "deterministic"`` renders :mod:`reference.renderers.mitsuba.deterministic`
     instead (one pass; ``seed`` picks the tracer's light samples).
 
     Inside :func:`reference.shared.shared` an equal call returns the first call's result.
@@ -83,7 +84,7 @@ def render_reference(scene: Scene, integrator: str = "whitted", seed: int = 0,
 def _render_reference(scene: Scene, integrator: str, seed: int, moments: bool, jitter: bool,
                       passes: int) -> ReferenceResult:
     if integrator == "deterministic":
-        from whitted.reference.deterministic import DeterministicReference
+        from whitted.reference.renderers.mitsuba.deterministic import DeterministicReference
 
         ref = DeterministicReference(scene, seed)
         start = time.perf_counter()

@@ -5,14 +5,14 @@ References
 Mitsuba's side of a comparison comes from one of three references
 (``reference``):
 
-``deterministic`` (the default; :mod:`reference.deterministic`). Mitsuba's
+``deterministic`` (the default; :mod:`reference.renderers.mitsuba.deterministic`). Mitsuba's
 plugins evaluated along the whole Whitted ray tree: both lobes of every
 delta BSDF, each with the weight Mitsuba's plugin gives it, and every area
 light sampled at the tracer's own light-sample points. Nothing is random on
 either side, so every scene, mirrors, glass and area lights included, is
 judged at float precision by ``exact-strata`` (or ``tessellated``).
 
-``onelobe`` (the ``whitted`` integrator of :mod:`reference.integrators`).
+``onelobe`` (the ``whitted`` integrator of :mod:`reference.renderers.mitsuba.onelobe`).
 One lobe per sample and light samples from its own stream, as Mitsuba's own
 integrators sample: an independent opinion, which also checks that the
 tracer's light samples are unbiased. Where it samples (mirrors and glass,
@@ -638,7 +638,7 @@ class Comparison:
 
 
 #: Samples per pixel the reference pools for the z-test, over ceil(N / spp) passes
-#: at the same strata (see reference.render.render_reference).
+#: at the same strata (see reference.renderers.mitsuba.render.render_reference).
 ZTEST_SAMPLES = 1024
 
 
@@ -750,7 +750,7 @@ class StatisticalResult:
     verdict: Verdict
     metrics: Metrics
     tracer_image: np.ndarray
-    ref: object                  # reference.render.ReferenceResult
+    ref: object                  # reference.renderers.mitsuba.render.ReferenceResult
     noise: Noise
     tracer_seeds: int
 
@@ -765,7 +765,7 @@ def statistical_comparison(scene, tracer_image: np.ndarray | None = None,
     :data:`TRACER_SEEDS` seeds from ``tracer_seed`` on. ``seed`` is the
     reference's first pass seed.
     """
-    from whitted.reference.render import render_reference
+    from whitted.reference.renderers.mitsuba.render import render_reference
     from whitted.tracer.integrator import Integrator
 
     if tracer_image is None and not scene.samples_lights():
@@ -852,8 +852,8 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
     (the tracer's area-light samples, which the deterministic reference reads too,
     and the one-lobe reference's lobe and light choices).
     """
-    from whitted.reference.deterministic import shares_light_samples
-    from whitted.reference.render import render_reference
+    from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
+    from whitted.reference.renderers.mitsuba.render import render_reference
     from whitted.tracer import backend
     from whitted.tracer.imageio import write_exr
     from whitted.tracer.integrator import Integrator
@@ -869,7 +869,8 @@ def compare_scene(scene, outdir: str | Path | None = None, reference: str = "det
         # tracer's points, so only a sampling reference can judge the scene.
         reference, second_opinion = "onelobe", False
         fallback = ("; an emitter of this scene has no shared light samples "
-                    "(reference.deterministic.SAMPLE_MAPS), so the one-lobe reference judges it")
+                    "(reference.renderers.mitsuba.deterministic.SAMPLE_MAPS), so the one-lobe "
+                    "reference judges it")
     integrator = INTEGRATOR_OF[reference]
     test_name = choose_test(scene, reference)
     integ = Integrator(scene, seed=seed)
@@ -980,7 +981,7 @@ def tracer_only_model_check(full_scene, full_image: np.ndarray, seed: int = 0) -
     test, so that a wrong Schlick fails. None where no declared part has a model.
     """
     from whitted.reference.materials import has_tracer_only_models, tracer_only_model
-    from whitted.reference.render import deterministic_image
+    from whitted.reference.renderers.mitsuba.render import deterministic_image
 
     if not has_tracer_only_models(full_scene):
         return None

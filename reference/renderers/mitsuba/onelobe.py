@@ -25,8 +25,8 @@ ray casts; only the loop is ours:
   (``tracer/emitters/base.py``);
 * ``max_depth`` counts path segments as Mitsuba's other integrators do.
 
-These terms are :mod:`reference.shading`, the same code as the deterministic
-reference's (:mod:`reference.deterministic`): the two differ only in how
+These terms are :mod:`reference.renderers.mitsuba.shading`, the same code as the deterministic
+reference's (:mod:`reference.renderers.mitsuba.deterministic`): the two differ only in how
 they choose lobes and light samples.
 
 With ``moments = true`` it also returns the per-sample second moment of each
@@ -35,10 +35,10 @@ the per-pixel variance for its z-test, and an AOV ``random``: 1 for a sample
 that drew a random number which could have changed its value (a lobe chosen
 where both had non-zero probability, or an area light sampled), else 0. Its
 pixel mean tells the harness which pixels are random at all, and over how
-many samples (see the zero-variance rule in :mod:`reference.compare`).
+many samples (see the zero-variance rule in :mod:`reference.verdicts.compare`).
 
 This integrator is the harness's second, independent opinion: the default
-reference, :mod:`reference.deterministic`, follows both lobes and shares the
+reference, :mod:`reference.renderers.mitsuba.deterministic`, follows both lobes and shares the
 tracer's light samples, so it carries no noise; this one samples as Mitsuba's
 own integrators do, so it also checks that the tracer's light samples are
 unbiased.
@@ -63,7 +63,7 @@ from __future__ import annotations
 import drjit as dr
 import mitsuba as mi
 
-from whitted.reference.shading import Terms
+from whitted.reference.renderers.mitsuba.shading import Terms
 
 
 class WhittedIntegrator(mi.SamplingIntegrator):
@@ -94,7 +94,7 @@ class WhittedIntegrator(mi.SamplingIntegrator):
         return mi.PCG32(width, mi.UInt64(key), mi.UInt64(_mix(key + 0x9E3779B9)))
 
     def sample(self, scene, sampler, ray, medium=None, active=True):
-        terms = Terms(mi, scene, self.max_depth)   # what a hit adds (reference/shading.py)
+        terms = Terms(mi, scene, self.max_depth)   # what a hit adds (shading.py beside this)
         emitters = terms.emitters
         rng = self._stream(sampler, ray)
 

@@ -66,7 +66,7 @@ class DepthRow:
 
 def depth_sweep(scene, depths: list[int], repeat: int, outdir: Path, mitsuba: bool = True,
                 log=print, min_weight: float = 0.0, seed: int = 0) -> list[DepthRow]:
-    from whitted.reference.render import render_reference
+    from whitted.reference.renderers.mitsuba.render import render_reference
     from whitted.tracer.imageio import write_png
     from whitted.tracer.integrator import Integrator
 

@@ -3,9 +3,9 @@
 LuxCore (``pyluxcore`` 2.11.2, the optional extra ``whitted[luxcore]``) is
 the successor of LuxRender, the renderer of the course's later assignments.
 It is independent of both the tracer and Mitsuba, so where those two
-disagree a third image makes it a vote (:mod:`reference.luxcore_compare`).
+disagree a third image makes it a vote (:mod:`reference.renderers.luxcore.vote`).
 
-How it renders (:mod:`reference.luxcore_scene` for the scene):
+How it renders (:mod:`reference.renderers.luxcore.scene` for the scene):
 
 * ``PATHCPU`` with the ``RANDOM`` sampler, one sample per film pixel per
   pass, ``passes`` passes with different seeds. ``TILEPATHCPU`` would give
@@ -19,15 +19,15 @@ How it renders (:mod:`reference.luxcore_scene` for the scene):
 * Pixel = the mean of its SUBSAMPLES^2 sub-pixels (filter ``NONE``): a
   stratified estimate of the mean of radiance over the pixel's square, which
   the tracer's and Mitsuba's strata centres approximate by the midpoint rule
-  (:mod:`reference.luxcore_compare` renders them with many strata).
-* Noise, as Mitsuba's pooled reference (reference/compare.py, rules 1 and
+  (:mod:`reference.renderers.luxcore.vote` renders them with many strata).
+* Noise, as Mitsuba's pooled reference (reference/verdicts/compare.py, rules 1 and
   4): the per-sample second moment over all N = passes x SUBSAMPLES^2
   samples, (E[x^2] - E[x]^2) / N, an upper bound for the variance of a
   stratified mean (it includes the variation across the pixel, edges
   included); and the spread of the passes' means / passes, unbiased, for the
   region sums.
 
-LuxCore runs in ``python -m reference.luxcore_runner`` under time limits that
+LuxCore runs in ``python -m reference.renderers.luxcore.runner`` under time limits that
 follow its work (:func:`pass_cpu_limit`, :func:`wait_limit`), one child for a
 list of scenes (:func:`render_many`), so its allocator and threads never share
 a process with Dr.Jit.
@@ -41,7 +41,7 @@ is more; a pass takes about 1-2 microseconds a sample here), and the caller
 waits, once it has nothing else to do, at most WHITTED_LUXCORE_TIMEOUT seconds,
 by default 60 s plus 60 s per pass still to render (:func:`wait_limit`). A
 report that meets either limit goes on without LuxCore's vote
-(reference.report).
+(reference.report.build).
 """
 
 from __future__ import annotations
@@ -58,7 +58,12 @@ from pathlib import Path
 
 import numpy as np
 
-from whitted.reference.luxcore_scene import Description, config_props, describe, props_text
+from whitted.reference.renderers.luxcore.scene import (
+    Description,
+    config_props,
+    describe,
+    props_text,
+)
 from whitted.tracer.errors import UserError
 from whitted.tracer.meshio import write_ply
 
@@ -69,7 +74,7 @@ INSTALL_HINT = ("LuxCore is not installed: pip install 'whitted[luxcore]' "
 #: Independent passes per render (their spread has PASSES - 1 degrees of freedom per pixel).
 PASSES = 4
 #: Film sub-pixels per image pixel side: PASSES x SUBSAMPLES^2 = 1024 samples per pixel, as
-#: Mitsuba's pooled sampling reference (reference.compare.ZTEST_SAMPLES).
+#: Mitsuba's pooled sampling reference (reference.verdicts.compare.ZTEST_SAMPLES).
 SUBSAMPLES = 16
 #: Samples per film pixel per pass.
 SPP_PER_PASS = 1
@@ -202,7 +207,8 @@ def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
         # shares its offset, and the caller's seek put the child's last lines (why it
         # failed) over the first ones.
         with open(tmp / "child.log", "a") as child_log:
-            proc = subprocess.Popen([sys.executable, "-m", "whitted.reference.luxcore_runner",
+            proc = subprocess.Popen([sys.executable, "-m",
+                                     "whitted.reference.renderers.luxcore.runner",
                                      *(["--nice", str(nice)] if nice else []),
                                      *map(str, jobs)], stdout=subprocess.DEVNULL,
                                     stderr=child_log, text=True, env=dict(os.environ))
@@ -333,7 +339,8 @@ class SharedCores:
 def _result(desc: Description, sums: np.ndarray, squares: np.ndarray, spp_per_pass: int,
             seconds: float) -> LuxResult:
     """The image, its variance and the passes' spread, from the child's sums over each
-    pixel's k x k film pixels (reference.luxcore_runner.pass_moments): ``sums`` P x H x W x 3
+    pixel's k x k film pixels (reference.renderers.luxcore.runner.pass_moments): ``sums``
+    P x H x W x 3
     per pass, ``squares`` H x W x 3 over all passes."""
     k = desc.subsamples
     p = len(sums)

@@ -11,16 +11,16 @@ Heckbert's paths, and the formulas those stand for (:data:`FORMULAS`, one
 entry per registered kind, each with the lecture topic it is taught under).
 
 The reference EXR holds four layers: R, G, B (the tracer's image at the
-scene's strata, or the mean of :data:`reference.compare.TRACER_SEEDS` seeds
+scene's strata, or the mean of :data:`reference.verdicts.compare.TRACER_SEEDS` seeds
 where it samples area lights), ``variance`` (of that mean; zero where it is
 deterministic), ``spread`` (the variance of one sample within each pixel,
-which :func:`reference.check.footprint_factor` scales) and ``quadrature``
-(:func:`reference.check.quadrature_error`). ``--update`` replaces R, G, B and
+which :func:`reference.check.judge.footprint_factor` scales) and ``quadrature``
+(:func:`reference.check.judge.quadrature_error`). ``--update`` replaces R, G, B and
 ``variance`` by the golden image's and keeps the other two.
 
 ``check`` grades a folder of images named after the scenes
 (``glass_sphere.png``, ``three_lights.exr``, ...) with
-:func:`reference.check.check_image`, against the stored references of a
+:func:`reference.check.judge.check_image`, against the stored references of a
 suite folder (``--suite``) or, without one, against references rendered now.
 ``--update`` stores the graded images as the suite's references (a renderer
 developer's golden images), and refuses to when any scene fails.
@@ -213,12 +213,12 @@ def _regular_file(path: Path, what: str, limit: int) -> os.stat_result:
 
 
 def read_reference(path: Path, name: str):
-    """A stored reference EXR as a :class:`reference.check.Reference`; one-line errors.
+    """A stored reference EXR as a :class:`reference.check.judge.Reference`; one-line errors.
 
     R, G, B must be finite; the ``variance``, ``spread`` and ``quadrature``
     layers, where present, finite and not negative, all of one size.
     """
-    from whitted.reference.check import Reference
+    from whitted.reference.check.judge import Reference
     from whitted.tracer.errors import UserError, one_line
     from whitted.tracer.imageio import read_exr_channels
 
@@ -263,10 +263,10 @@ def read_reference(path: Path, name: str):
 
 def export(outdir: Path, scene_paths: list[Path], log=print) -> dict:
     """Write the suite (module docstring); return the manifest."""
-    from whitted.reference.check import tracer_reference
-    from whitted.reference.compare import write_json
-    from whitted.reference.mitsuba_scene import write_xml
-    from whitted.reference.suspects import light_path_images
+    from whitted.reference.check.judge import tracer_reference
+    from whitted.reference.check.suspects import light_path_images
+    from whitted.reference.renderers.mitsuba.scene import write_xml
+    from whitted.reference.verdicts.compare import write_json
     from whitted.tracer import load_scene
     from whitted.tracer.imageio import write_png
 
@@ -587,7 +587,7 @@ class Graded:
     passed: bool
     status: str                      # "pass", "FAIL", "missing", "error"
     message: str = ""
-    run: object = None               # reference.check.CheckRun
+    run: object = None               # reference.check.judge.CheckRun
     #: the scene, image and stored reference (for --update and the page)
     scene: object = None
     user: object = None
@@ -637,8 +637,8 @@ def grade(images: Path, suite: Suite | Path | None, pattern: str | None = None,
     The scenes and the stored references are all read and checked before any
     rendering: a bad suite is bad input (one line), not a failing scene.
     """
-    from whitted.reference.check import check_image
-    from whitted.reference.user_image import read_user_image
+    from whitted.reference.check.images import read_user_image
+    from whitted.reference.check.judge import check_image
     from whitted.tracer import load_scene
     from whitted.tracer.errors import UserError
 
@@ -685,7 +685,7 @@ OUTPUT_NAMES = ("index.html", "suite.json")
 
 def write_outputs(result: SuiteResult, outdir: Path) -> list[Path]:
     """``suite.json`` and ``index.html`` in ``outdir`` (which exists)."""
-    from whitted.reference.compare import write_json
+    from whitted.reference.verdicts.compare import write_json
 
     write_json(outdir / "suite.json", result.to_json())
     (outdir / "index.html").write_text(suite_page(result))
@@ -764,7 +764,7 @@ def stage_references(result: SuiteResult, suite: Suite, pending: PendingFiles) -
     docstring). Returns the reference EXRs that :meth:`PendingFiles.commit`
     will replace.
     """
-    from whitted.reference.compare import write_json
+    from whitted.reference.verdicts.compare import write_json
     from whitted.tracer.errors import UserError
     from whitted.tracer.imageio import write_png
 
@@ -827,8 +827,8 @@ def suite_page(result: SuiteResult) -> str:
     """One self-contained HTML page: the table, then each scene with its viewer."""
     import html
 
-    from whitted.reference.check import PAGE_CSS, _verdict_html, describe_method, result_rows
-    from whitted.reference.viewer import assets, viewer
+    from whitted.reference.check.judge import PAGE_CSS, _verdict_html, describe_method, result_rows
+    from whitted.reference.report.viewer import assets, viewer
 
     esc = html.escape
     parts = ["<!doctype html><html lang='en'><head><meta charset='utf-8'>",

@@ -1,8 +1,8 @@
 """What both Mitsuba-side references do at one hit of Whitted's ray tree.
 
-The deterministic reference (:mod:`reference.deterministic`, both lobes of
+The deterministic reference (:mod:`reference.renderers.mitsuba.deterministic`, both lobes of
 every delta BSDF, the tracer's light samples) and the one-lobe integrator
-(:mod:`reference.integrators`, one lobe and its own light samples per
+(:mod:`reference.renderers.mitsuba.onelobe`, one lobe and its own light samples per
 sample) differ only in how they choose; what a hit adds and where rays go
 next is this one piece of code, so that the two honour the hooks of the
 scene model alike (``docs/extending.md``). Everything is a call into

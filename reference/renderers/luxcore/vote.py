@@ -1,7 +1,7 @@
 """Three renderers, one vote: the tracer, Mitsuba and LuxCore judged pairwise.
 
 Where the tracer and Mitsuba disagree, one of them is wrong and only a person
-could say which; LuxCore (:mod:`reference.luxcore`) is a third, independent
+could say which; LuxCore (:mod:`reference.renderers.luxcore.render`) is a third, independent
 opinion. Each scene is rendered small (:func:`luxcore_scene`: at most
 ``PIXELS`` pixels).
 
@@ -23,10 +23,10 @@ in each of its pixels (1/128 in a quick report).
 Pass k uses the same offset and seed k on both sides:
 
 * the tracer (seed k: its area-light samples);
-* Mitsuba: the deterministic reference (reference/deterministic.py) at the
+* Mitsuba: the deterministic reference (reference/renderers/mitsuba/deterministic.py) at the
   tracer's light samples of seed k, so the two agree at float precision,
   pass by pass;
-* LuxCore: 1024 jittered samples per pixel (``reference.luxcore``).
+* LuxCore: 1024 jittered samples per pixel (``reference.renderers.luxcore.render``).
 
 Noise: none on the tracer's and Mitsuba's side where no light is sampled
 (the passes are fixed); with area lights, the spread of their passes (seeds)
@@ -39,7 +39,7 @@ from its passes' spread (region sums). Every LuxCore sample is random
 vanishes.
 
 The two pairs with LuxCore are judged by the statistical verdict of
-:mod:`reference.compare` (the z-test's rules 1 to 4: per pixel, 4 x 4
+:mod:`reference.verdicts.compare` (the z-test's rules 1 to 4: per pixel, 4 x 4
 blocks, signed sums over materials, tiles and the image), with both sides'
 noise; rule 3's block median, which has no allowance for noise, is shown
 but not judged (:func:`judge_pair`). The verdict of a scene
@@ -186,7 +186,7 @@ def tracer_side(scene, passes: int = 0) -> Side:
 
 def mitsuba_side(scene, passes: int = 0) -> Side:
     """Mitsuba: the deterministic reference at the tracer's light samples of each seed."""
-    from whitted.reference.deterministic import DeterministicReference
+    from whitted.reference.renderers.mitsuba.deterministic import DeterministicReference
 
     return _passes("mitsuba", scene, lambda s, k: DeterministicReference(s, k).render().image,
                    passes)
@@ -226,7 +226,7 @@ def blocks_allowed(n_blocks: int, alpha: float = BLOCK_ALPHA) -> int:
 def _block_allowance(check: dict | None, image: np.ndarray) -> None:
     """Rule 3's count of blocks beyond 5 % and 3 sigma, judged against the larger of its
     2 % and :func:`blocks_allowed` (the vote's images are small)."""
-    from whitted.reference.compare import block_mean
+    from whitted.reference.verdicts.compare import block_mean
 
     if check is None:
         return
@@ -238,7 +238,7 @@ def _block_allowance(check: dict | None, image: np.ndarray) -> None:
 
 def judge_pair(scene, a: Side, b: Side, regions: dict) -> dict:
     """Side a against side b by the statistical verdict, both sides' noise counted."""
-    from whitted.reference.compare import Noise, image_metrics, judge
+    from whitted.reference.verdicts.compare import Noise, image_metrics, judge
 
     ref, test = (b, a) if b.variance is not None else (a, b)
     metrics = image_metrics(test.image, ref.image, with_flip=False)
@@ -312,7 +312,7 @@ class Started:
     scenes: list
     small: list
     why: list
-    job: object = None       # reference.luxcore.LuxJob, None when no scene is compared
+    job: object = None       # renderers.luxcore.render.LuxJob, None when no scene is compared
 
     def close(self) -> None:
         if self.job is not None:
@@ -327,9 +327,9 @@ def start_three(scenes: list, quick: bool = False, nice: int = 0) -> Started:
     report`` runs its comparisons and the formula-bug sweep while LuxCore renders). A
     scene that does not convert gets its one-line reason.
     """
-    from whitted.reference import luxcore
-    from whitted.reference.compare import comparable
-    from whitted.reference.luxcore_scene import describe
+    from whitted.reference.renderers.luxcore import render as luxcore
+    from whitted.reference.renderers.luxcore.scene import describe
+    from whitted.reference.verdicts.compare import comparable
     from whitted.tracer.errors import UserError
 
     small = [comparable(luxcore_scene(s, QUICK_PIXELS if quick else PIXELS)) for s in scenes]
@@ -353,13 +353,13 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
 
     ``main``: per scene, the main tracer-Mitsuba comparison (``whitted compare`` at the
     scene's own settings) as ``{"passed", "checks"}``, which is that pair's verdict;
-    run here (:func:`reference.compare.compare_scene`) where not given. ``quick``:
+    run here (:func:`reference.verdicts.compare.compare_scene`) where not given. ``quick``:
     QUICK_PIXELS pixels. Scenes that do not convert, or cannot be compared, get the
     one-line reason. ``started``: :func:`start_three` of the same scenes, called
     earlier (otherwise called here). The tracer's and Mitsuba's sides render while
     LuxCore does, and ``progress(done, total)`` counts LuxCore's passes after that.
     """
-    from whitted.reference.compare import regions_of
+    from whitted.reference.verdicts.compare import regions_of
     from whitted.tracer.integrator import material_ids
 
     if started is None:
@@ -383,7 +383,7 @@ def compare_three(scenes: list, progress=None, quick: bool = False,
         if main is not None:
             m = main[i]
         else:
-            from whitted.reference.compare import compare_scene
+            from whitted.reference.verdicts.compare import compare_scene
 
             c, _, _ = compare_scene(scenes[i])
             m = {"passed": c.passed, "checks": c.checks}

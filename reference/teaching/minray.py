@@ -394,7 +394,7 @@ def summary(differences: list[Difference]) -> str:
 # --------------------------------------------------------------------------- table
 
 def main(argv: list[str] | None = None) -> int:
-    """``python -m reference.minray``: the stored minray images against the tracer's.
+    """``python -m reference.teaching.minray``: the stored minray images against the tracer's.
 
     For every image in ``tests/data/minray/`` (SIZE 32 and 256, DEPTH 1-5, 10,
     20), render ``heckbert_minray`` at that size and DEPTH, and print how the
@@ -409,8 +409,8 @@ def main(argv: list[str] | None = None) -> int:
     from whitted.tracer.imageio import ppm_values, read_ppm
     from whitted.tracer.integrator import Integrator
 
-    data = Path(__file__).resolve().parent.parent / "tests" / "data" / "minray"
-    ap = argparse.ArgumentParser(prog="python -m whitted.reference.minray",
+    data = Path(__file__).resolve().parents[2] / "tests" / "data" / "minray"
+    ap = argparse.ArgumentParser(prog="python -m whitted.reference.teaching.minray",
                                  description=main.__doc__)
     ap.add_argument("--data", type=Path, default=data, help="folder of minray_SIZE_depthD.ppm[.gz]")
     args = ap.parse_args(argv)

@@ -352,7 +352,7 @@ def draw(scene, image: np.ndarray, trees: list[Tree], path: str, notes: list[str
 
 def ldde_lsde_panel(scene, spp: int = 64, seed: int = 0):
     """(luminance image, title): Mitsuba path (3 segments) minus Whitted (3 segments)."""
-    from whitted.reference.render import render_reference
+    from whitted.reference.renderers.mitsuba.render import render_reference
 
     s = scene.with_overrides(max_depth=3, spp=spp)
     path = render_reference(s, "path", seed=seed, jitter=True).image

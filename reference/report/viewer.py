@@ -12,7 +12,7 @@ What a reader can do, modelled on tev (Tom's EXR viewer, github.com/Tom94/tev):
 
 * hover: the pixel's coordinates, both images' linear R, G, B and their
   relative difference sum_c |a - b| / max(sum_c |b|, floor) (the floor as in
-  :func:`reference.compare.pixel_relative_difference`);
+  :func:`reference.verdicts.compare.pixel_relative_difference`);
 * click, or the space bar or F: flip between the two images; 1, 2, 3 show the
   first, the second, the difference (false colour on a log scale from 1e-8 to
   1, the ``inferno`` map of the heat maps); E and Shift+E: exposure up and down

@@ -1,6 +1,6 @@
 """The deterministic reference: Whitted's ray tree evaluated with Mitsuba's own plugins.
 
-The harness's second integrator (``whitted`` in :mod:`reference.integrators`)
+The harness's second integrator (``whitted`` in :mod:`reference.renderers.mitsuba.onelobe`)
 follows one lobe per sample and samples lights from its own random stream, so
 its images carry noise that hides small biases. This one has none. It is a
 wavefront over recursion levels, like the tracer, in which every step is a
@@ -30,8 +30,8 @@ call into Mitsuba 3's Python API and nothing is the tracer's code:
   of the last segment are traced only where they can meet an emitter that is
   not a hit term, as in the tracer.
 
-What a hit adds and which rays it spawns is :mod:`reference.shading`, the
-same code as the one-lobe integrator's (:mod:`reference.integrators`).
+What a hit adds and which rays it spawns is :mod:`reference.renderers.mitsuba.shading`, the
+same code as the one-lobe integrator's (:mod:`reference.renderers.mitsuba.onelobe`).
 Which lobes exist comes from the BSDF's flags, never from the material's kind:
 a new Mitsuba BSDF with delta or smooth lobes needs no change here.
 
@@ -59,7 +59,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from whitted.reference.shading import Terms
+from whitted.reference.renderers.mitsuba.shading import Terms
 from whitted.tracer.backend import jit
 from whitted.tracer.sampling import light_sample, pixel_samples
 from whitted.tracer.scene import Disk, Rectangle, Scene, Sphere, Triangle
@@ -181,7 +181,7 @@ class DeterministicReference:
         """``models``: the scene's tracer-only parts as the harness models them (Schlick's
         dielectric, ``reference/materials/dielectric.py``) instead of Mitsuba's equivalent."""
         from whitted.reference import mitsuba
-        from whitted.reference.mitsuba_scene import load
+        from whitted.reference.renderers.mitsuba.scene import load
 
         self.mi = mi = mitsuba()
         self.scene = scene

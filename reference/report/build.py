@@ -1,8 +1,8 @@
 """Accuracy reports: every built-in scene compared with Mitsuba, and the Fresnel curves.
 
 :func:`build_report` renders each scene with both renderers (see
-:mod:`reference.compare` for the tests and their tolerances), tabulates the
-Fresnel curves (:mod:`reference.fresnel_curves`), and writes three files:
+:mod:`reference.verdicts.compare` for the tests and their tolerances), tabulates the
+Fresnel curves (:mod:`reference.teaching.fresnel_curves`), and writes three files:
 
 * ``index.html``: one self-contained page (images embedded) for people;
 * ``report.md``: the summary as Markdown, for a CI log or job summary;
@@ -11,7 +11,7 @@ Fresnel curves (:mod:`reference.fresnel_curves`), and writes three files:
 Every scene is judged against the deterministic reference (both lobes of
 every mirror and glass, area lights at the tracer's light samples) at float
 precision; scenes with area lights also get the one-lobe reference's
-statistical verdict as a second opinion (``reference.compare``).
+statistical verdict as a second opinion (``reference.verdicts.compare``).
 
 ``--quick`` renders every scene smaller and with fewer samples per pixel: the
 tests keep their meaning at any size and sample count (the exact-strata test
@@ -34,7 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
-from whitted.reference.compare import write_json
+from whitted.reference.verdicts.compare import write_json
 
 QUICK_WIDTH = 96
 QUICK_SPP = 16
@@ -56,7 +56,7 @@ class Report:
     #: the formula-bug sweep (reference.mutants.SweepResult.to_json()), or None
     mutants: dict | None = None
     #: Mitsuba scenes imported and compared with Mitsuba's render of the original
-    #: (reference.importer.validate_case dicts)
+    #: (reference.renderers.mitsuba.importer.validate_case dicts)
     imported: list = field(default_factory=list)
     #: optional parts that did not run, and why ({"luxcore": "LuxCore is not installed: ..."})
     not_available: dict = field(default_factory=dict)
@@ -150,7 +150,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     report then passes only if every bug is caught.
 
     ``luxcore``: also the three-way verdict of each scene with LuxCore
-    (:mod:`reference.luxcore_compare`, one LuxCore child process for all scenes). The
+    (:mod:`reference.renderers.luxcore.vote`, one LuxCore child process for all scenes). The
     child starts first, at the lowest priority (:data:`LUXCORE_NICE`), and renders while
     the comparisons, the Fresnel curves and the sweep run; the imported scenes, timed
     too, come after it.
@@ -158,7 +158,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
     tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
     LuxCore, shown in the report, not a failure of the tracer. Nor does LuxCore being
-    missing, failing or past its time limits (reference.luxcore): the report then
+    missing, failing or past its time limits (reference.renderers.luxcore.render): the report then
     goes on without the vote, and says why in one line on stderr and as "not
     available" in its three files (:func:`not_available`).
     """
@@ -184,8 +184,8 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
     total = len(scenes) + (1 if fresnel else 0)
     started = None
     if luxcore:
-        from whitted.reference import luxcore as lux
-        from whitted.reference.luxcore_compare import compare_three, start_three
+        from whitted.reference.renderers.luxcore import render as lux
+        from whitted.reference.renderers.luxcore.vote import compare_three, start_three
 
         t_lux = time.perf_counter()
         sized = [quick_overrides(s) if quick else s for s in scenes]
@@ -199,7 +199,7 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
             log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while "
                 "the report goes on")
     try:
-        from whitted.reference.luxcore import SharedCores
+        from whitted.reference.renderers.luxcore.render import SharedCores
 
         _compare_scenes(report, scenes, work, quick, log, reference, second_opinion, total)
         # Dr.Jit on one thread while LuxCore's child renders beside the untimed sweep
@@ -225,7 +225,7 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
         log(f"LuxCore: {sum(t.compared for t in threes)} scenes compared "
             f"({time.perf_counter() - t_lux:.1f} s since it started)")
     if imported:
-        from whitted.reference.importer import imported_cases, validate_case
+        from whitted.reference.renderers.mitsuba.importer import imported_cases, validate_case
 
         for case in imported_cases(quick):
             t0 = time.perf_counter()
@@ -276,7 +276,7 @@ def _not_available_lines(report: Report) -> list[str]:
 def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
                     total) -> None:
     """Each scene's comparison with Mitsuba, its images and light paths, into ``report``."""
-    from whitted.reference.compare import compare_scene
+    from whitted.reference.verdicts.compare import compare_scene
 
     for i, scene in enumerate(scenes, 1):
         if quick:
@@ -300,7 +300,7 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
                        between) -> None:
     """The report's Fresnel curves and formula-bug sweep, while LuxCore's child renders;
     ``between()`` is called between pieces of the sweep's work."""
-    from whitted.reference.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
+    from whitted.reference.teaching.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
 
     if fresnel:
         t0 = time.perf_counter()
@@ -337,7 +337,7 @@ def light_paths(scene) -> tuple[dict, dict]:
     The four expressions partition every path a Whitted tracer makes, so the
     parts sum to the full render; the largest deviation of that sum is kept.
     """
-    from whitted.reference.compare import shared_tracer_image
+    from whitted.reference.verdicts.compare import shared_tracer_image
     from whitted.tracer.integrator import Integrator
 
     full = shared_tracer_image(scene)   # the comparison's render, where it is the same scene
@@ -377,15 +377,15 @@ def _png_bytes(image: np.ndarray, scale: int = 1) -> bytes:
 
 
 def _scene_viewer(tracer_img, ref_img) -> str:
-    """The tev-like viewer of the two renders (reference.viewer)."""
-    from whitted.reference.viewer import viewer
+    """The tev-like viewer of the two renders (reference.report.viewer)."""
+    from whitted.reference.report.viewer import viewer
 
     return viewer([("tracer", tracer_img), ("Mitsuba", ref_img)],
                   "hover for both renders' values; click to flip; wheel to zoom")
 
 
 def _viewer_assets() -> str:
-    from whitted.reference.viewer import assets
+    from whitted.reference.report.viewer import assets
 
     return assets()
 
@@ -460,7 +460,7 @@ def markdown(report: Report) -> str:
     if any("luxcore" in s for s in report.scenes):
         lines += ["", "## Three renderers: tracer, Mitsuba, LuxCore", "",
                   "Each scene small, judged pairwise by the statistical verdict "
-                  "(reference/luxcore_compare.py); the tracer-Mitsuba pair is the main "
+                  "(reference/renderers/luxcore/vote.py); the tracer-Mitsuba pair is the main "
                   "comparison above. The vote does not change the report's result.", "",
                   "| scene | size | tracer-Mitsuba | tracer-LuxCore | Mitsuba-LuxCore | "
                   "verdict |", "|---|---|---|---|---|---|"]

@@ -1,7 +1,7 @@
 """Another renderer's image against the reference: is *your* ray tracer right?
 
 ``whitted check IMAGE --scene SCENE`` reads an image made by any renderer
-(:mod:`reference.user_image`), renders the reference for the scene, and
+(:mod:`reference.check.images`), renders the reference for the scene, and
 judges the difference D = image - reference with two rules that each state
 their false-alarm rate (alpha: the probability that a correct image fails)
 and their power (what they see). The user's noise is unknown; it is taken
@@ -39,7 +39,7 @@ allowance of failing pixels absorbs that, and the figures below are measured.
 Quantisation. An 8-bit value is the light rounded to a code: an error
 uniform over the code's cell, standard deviation step / sqrt(12) in the
 encoded domain, and step the cell's width in linear light (``step`` of
-:class:`~reference.user_image.UserImage`: through the sRGB curve, about 1.1 %
+:class:`~reference.check.images.UserImage`: through the sRGB curve, about 1.1 %
 of the value at 0.5 and 0.4 % near 1); it is added to every pixel's variance.
 Where the image has no noise of its own, rounding is not random: a flat area
 rounds every pixel the same way, and its sum moves by up to half a step a
@@ -60,7 +60,7 @@ The rules
 1. Per pixel (``pixels``): a pixel fails when any channel's |D| exceeds the
    threshold z_p sqrt(Var + (1e-4 max(|image|, |reference|))^2), z_p the
    two-sided Sidak level for alpha 0.01 over the pixels (5.0 at 160 x 120), as
-   in ``reference.compare``'s rule 1; the image fails when more than 0.25 % of
+   in ``reference.verdicts.compare``'s rule 1; the image fails when more than 0.25 % of
    its pixels fail (Mitsuba's render tests allow as many). Alpha: with known
    variance, 0.03 failing pixels are expected where 48 are allowed; with the
    local estimate, the threshold is met more often (the estimate has about 30
@@ -74,7 +74,7 @@ The rules
    seen (the tracer's first hit at each pixel's centre), the background, 4 x 4
    tiles and the whole image, Z_g = (|sum D| - quantisation allowance) /
    sqrt(sum Var), against the Sidak level for a family-wise alpha of 1e-3 over
-   the regions (about 4.0 for 20 regions), as ``reference.compare``'s rule 4.
+   the regions (about 4.0 for 20 regions), as ``reference.verdicts.compare``'s rule 4.
    This is what sees a small bias over many pixels; each region's smallest
    bias seen with 90 % power, ((z + 1.28) sqrt(sum Var) + allowance) / sum
    |reference|, is reported. The thresholds above do not change it.
@@ -89,13 +89,13 @@ and the power against biases injected into them.
 
 The reference. For a scene whose lights are all points, spots or
 directional lights, the tracer's image at the scene's strata is
-deterministic (``reference.deterministic`` shows that Mitsuba's plugins give
+deterministic (``reference.renderers.mitsuba.deterministic`` shows that Mitsuba's plugins give
 the same at float precision; ``--mitsuba`` checks that again and judges the
 image against Mitsuba's image too). Where the tracer samples area lights, the
 reference is the mean of ``compare.TRACER_SEEDS`` seeds, and its own
 variance is added to the image's.
 
-An image that fails is explained (:mod:`reference.suspects`): its
+An image that fails is explained (:mod:`reference.check.suspects`): its
 difference split by light path and by first-hit material, and the catalog's
 formula bugs (:mod:`reference.mutants`) that the scene reaches ranked by how
 much of the difference each one's image explains (``suspects``; measured by
@@ -110,7 +110,7 @@ from statistics import NormalDist
 
 import numpy as np
 
-from whitted.reference.compare import (
+from whitted.reference.verdicts.compare import (
     FLOAT_SIGMA,
     POWER_Z,
     REGION_ALPHA,
@@ -201,7 +201,7 @@ def quadrature_error(scene, image: np.ndarray, seed: int = 0) -> np.ndarray:
 
 def tracer_reference(scene, seed: int = 0) -> Reference:
     """The tracer's image at the scene's strata: deterministic, or the mean of seeds."""
-    from whitted.reference.compare import TRACER_SEEDS, tracer_pooled
+    from whitted.reference.verdicts.compare import TRACER_SEEDS, tracer_pooled
     from whitted.tracer.integrator import Integrator
 
     spp = scene.film.strata ** 2
@@ -220,9 +220,10 @@ def tracer_reference(scene, seed: int = 0) -> Reference:
 
 
 def mitsuba_reference(scene, seed: int = 0) -> Reference:
-    """Mitsuba's deterministic reference (reference.deterministic), at the tracer's seeds."""
-    from whitted.reference.compare import TRACER_SEEDS
-    from whitted.reference.render import render_reference
+    """Mitsuba's deterministic reference (reference.renderers.mitsuba.deterministic), at
+    the tracer's seeds."""
+    from whitted.reference.renderers.mitsuba.render import render_reference
+    from whitted.reference.verdicts.compare import TRACER_SEEDS
     from whitted.tracer.sampling import seed32
 
     seeds = TRACER_SEEDS if scene.samples_lights() else 1
@@ -245,7 +246,7 @@ def path_variance(scene, samples: int = SPP_MODEL_SAMPLES, seed: int = 0) -> np.
     variance of one sample placed uniformly in the pixel.
     """
     from whitted.reference import mitsuba
-    from whitted.reference.mitsuba_scene import scene_tree, to_dict
+    from whitted.reference.renderers.mitsuba.scene import scene_tree, to_dict
     from whitted.tracer.limits import check_render
 
     mi = mitsuba()
@@ -446,7 +447,7 @@ def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p):
 def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
                 material_names: list[str] | None = None, model_variance: np.ndarray | None = None,
                 thresholds: Thresholds | None = None) -> CheckResult:
-    """Judge a :class:`~reference.user_image.UserImage` against a :class:`Reference`.
+    """Judge a :class:`~reference.check.images.UserImage` against a :class:`Reference`.
 
     ``model_variance`` is the variance of the image's pixels under ``--spp N``
     (:func:`path_variance` / N); the image's own variance layer takes
@@ -628,7 +629,7 @@ class CheckRun:
     #: light paths and materials, for an image that fails
     decomposition: dict | None = None
     #: the catalog's formula bugs ranked by how much of the difference each explains
-    #: (:class:`reference.suspects.SuspectRanking`), for an image that fails
+    #: (:class:`reference.check.suspects.SuspectRanking`), for an image that fails
     suspects: dict | None = None
     files: dict = field(default_factory=dict)
     seconds: float = 0.0
@@ -647,14 +648,15 @@ class CheckRun:
 def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | None = None,
                 mitsuba: bool = False, seed: int = 0, reference: Reference | None = None,
                 decompose: bool = True, suspects: bool = True, log=None) -> CheckRun:
-    """Judge a read image (:class:`~reference.user_image.UserImage`) against the scene's reference.
+    """Judge a read image (:class:`~reference.check.images.UserImage`) against the scene's
+    reference.
 
     ``reference`` may be given (a suite's stored image); otherwise the tracer
     renders it. ``spp`` selects the ``--spp`` noise model, ``mitsuba`` adds
     Mitsuba's deterministic reference as a second reference. An image that
     fails gets its difference split by light path and material (``decompose``)
     and the catalog's formula bugs ranked by how much of it each explains
-    (``suspects``; :func:`reference.suspects.rank_catalog`).
+    (``suspects``; :func:`reference.check.suspects.rank_catalog`).
     """
     import time
 
@@ -675,7 +677,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     run = CheckRun(user.path, scene.name, user.storage, result.passed, result.warned, spp,
                    result)
     if mitsuba:
-        from whitted.reference.compare import image_metrics, judge
+        from whitted.reference.verdicts.compare import image_metrics, judge
 
         say("rendering Mitsuba's deterministic reference")
         mref = mitsuba_reference(scene, seed)
@@ -692,7 +694,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
         say("splitting the difference by light path and material")
         run.decomposition = decomposition(scene, result, ids, names, seed)
     if suspects and not result.passed:
-        from whitted.reference.suspects import rank_catalog
+        from whitted.reference.check.suspects import rank_catalog
 
         say("ranking the catalog's formula bugs by how much of the difference each explains")
         a = result.arrays
@@ -705,7 +707,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
 def decomposition(scene, result: CheckResult, ids: np.ndarray, names: list[str],
                   seed: int = 0) -> dict:
     """The failing image's difference by light path and by first-hit material."""
-    from whitted.reference.suspects import light_path_fit, light_path_images, material_split
+    from whitted.reference.check.suspects import light_path_fit, light_path_images, material_split
 
     a = result.arrays
     parts = light_path_images(scene, seed)
@@ -723,13 +725,13 @@ def format_run(run: CheckRun, title: str) -> str:
                    f"{'pass' if rv['passed'] else 'FAIL'}")
         out.append(format_check(run.mitsuba, "the image against Mitsuba's reference:", run.spp))
     if run.decomposition:
-        from whitted.reference.suspects import MaterialPart, PathFit, format_decomposition
+        from whitted.reference.check.suspects import MaterialPart, PathFit, format_decomposition
 
         d = run.decomposition
         out.append(format_decomposition([PathFit(**p) for p in d["light_paths"]],
                                         [MaterialPart(**m) for m in d["materials"]]))
     if run.suspects is not None:
-        from whitted.reference.suspects import SuspectFit, format_suspects
+        from whitted.reference.check.suspects import SuspectFit, format_suspects
 
         sp = run.suspects
         out.append(format_suspects([SuspectFit(**f) for f in sp["top"]]) +
@@ -804,7 +806,7 @@ def write_outputs(run: CheckRun, outdir, title: str, final=None) -> dict:
     """
     from pathlib import Path
 
-    from whitted.reference.compare import heat_map, pixel_relative_difference, write_json
+    from whitted.reference.verdicts.compare import heat_map, pixel_relative_difference, write_json
     from whitted.tracer.errors import UserError
     from whitted.tracer.imageio import write_exr
 
@@ -867,7 +869,7 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
     import base64
     import html
 
-    from whitted.reference.viewer import assets, viewer
+    from whitted.reference.report.viewer import assets, viewer
 
     esc = html.escape
     r = run.result

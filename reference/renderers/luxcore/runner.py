@@ -1,8 +1,9 @@
-"""LuxCore's side of a comparison, run in a child process: ``python -m reference.luxcore_runner``.
+"""LuxCore's side of a comparison, run in a child process:
+``python -m whitted.reference.renderers.luxcore.runner``.
 
 LuxCore's allocator and thread pool never share a process with Dr.Jit:
-:mod:`reference.luxcore` writes each job (the scene description of
-:mod:`reference.luxcore_scene` and the passes' seeds) to an ``.npz`` file, its
+:mod:`reference.renderers.luxcore.render` writes each job (the scene description of
+:mod:`reference.renderers.luxcore.scene` and the passes' seeds) to an ``.npz`` file, its
 meshes to binary PLY files beside it that LuxCore reads itself, and starts
 this module on the list of jobs; each job's passes
 come back in ``<job>.out.npz``, summed over each image pixel's k x k film pixels
@@ -18,7 +19,7 @@ Rules measured on pyluxcore 2.11.2:
   (``batch.haltspp``) runs inside ``UpdateStats()``, so the session is polled.
 
 A pass is limited by the CPU time this process spends on it (the job's
-``pass_cpu``, reference.luxcore.pass_cpu_limit), not by the wall clock: at
+``pass_cpu``, reference.renderers.luxcore.render.pass_cpu_limit), not by the wall clock: at
 ``nice`` 19 beside a busy machine a pass may wait minutes for a core, which is
 not LuxCore being slow. A pass past its limit ends the child with one line.
 """
@@ -82,7 +83,7 @@ def run_job(pyluxcore, path: str) -> None:
 
 def main(argv: list[str]) -> int:
     """``[--nice N] JOB...``: render each job; ``--nice`` lowers this process's priority
-    by N first (``whitted report`` starts LuxCore at 19, see reference.report)."""
+    by N first (``whitted report`` starts LuxCore at 19, see reference.report.build)."""
     import os
 
     from whitted.reference.malloc import keep_freed_memory

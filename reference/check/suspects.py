@@ -2,7 +2,7 @@
 
 Three views of a failing image's difference D = image - reference, each a
 weighted least-squares fit, weights 1 / Var (the per-pixel noise of
-:func:`reference.check.judge_image`), so that a pixel counts by how sure its
+:func:`reference.check.judge.judge_image`), so that a pixel counts by how sure its
 difference is:
 
 * by light path (:func:`light_path_fit`): the reference split into Heckbert's
@@ -167,7 +167,7 @@ def material_split(diff: np.ndarray, var: np.ndarray, reference: np.ndarray,
                    material_ids: np.ndarray, material_names: list[str],
                    use: np.ndarray | None = None) -> list[MaterialPart]:
     """The difference beyond noise over each first-hit material, the background, the emitters."""
-    from whitted.reference.compare import regions_of
+    from whitted.reference.verdicts.compare import regions_of
 
     d = np.asarray(diff, dtype=np.float64).sum(-1)
     r = np.abs(np.asarray(reference, dtype=np.float64)).sum(-1)
@@ -317,15 +317,15 @@ def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
     """Rank formula bugs by how well each one's image explains ``user_image``.
 
     ``reference`` defaults to the tracer's image of the scene, ``variance``
-    (the weights' inverse) to :func:`reference.check.judge_image`'s noise
+    (the weights' inverse) to :func:`reference.check.judge.judge_image`'s noise
     estimate for the user's image. For each candidate, D = image - reference
     is fitted by k (M - reference), M the candidate's render; candidates are
     ranked by the share of D they explain (best first).
     """
     u = np.asarray(user_image, dtype=np.float64)
     if reference is None or variance is None:
-        from whitted.reference.check import judge_image, tracer_reference
-        from whitted.reference.user_image import UserImage
+        from whitted.reference.check.images import UserImage
+        from whitted.reference.check.judge import judge_image, tracer_reference
 
         ref = tracer_reference(scene)
         if reference is None:

@@ -16,12 +16,12 @@ that prints minray's own numbers:
   uncompressed ppm to png");
 * ``heckbert_runtimes1.txt`` / ``.png``: the tracer's time per DEPTH (median
   of ``repeat`` warm renders), the rays it traced, and the rays minray traces
-  for the same image, counted exactly (:func:`reference.minray.ray_count`):
+  for the same image, counted exactly (:func:`reference.teaching.minray.ray_count`):
   minray follows both branches at every hit, so its count grows
   exponentially with DEPTH, while the tracer drops branches of weight zero;
 * ``light_paths.png``: the DEPTH 5 picture with the ray trees of pixels
-  that show LE, LDE, LSE and LDSE (:mod:`reference.paths`), one LDDE and one
-  LSDE path found by sampling (:func:`reference.paths.example_paths`), marked
+  that show LE, LDE, LSE and LDSE (:mod:`reference.teaching.paths`), one LDDE and one
+  LSDE path found by sampling (:func:`reference.teaching.paths.example_paths`), marked
   as paths no Whitted tracer makes, and beside it where Mitsuba's path
   tracer finds them in the physically based version of the scene
   (``heckbert_physical``: path tracer minus Whitted, 3 segments each);
@@ -86,7 +86,7 @@ def scene_at(size: int, depth: int | None = None):
 def run(outdir: Path, size: int = 256, sweep: tuple[int, ...] = SWEEP_DEPTHS, repeat: int = 3,
         mitsuba: bool = True, log=print) -> Result:
     """Write the assignment's files into ``outdir`` (see the module docstring)."""
-    from whitted.reference.minray import ray_count
+    from whitted.reference.teaching.minray import ray_count
     from whitted.tracer.imageio import ppm_values
     from whitted.tracer.integrator import Integrator
 
@@ -168,7 +168,7 @@ def write_runtimes(rows: list[SweepRow], outdir: Path, size: int) -> list[Path]:
         "# depth: Heckbert's DEPTH (trace calls); seconds: median of the tracer's timed renders",
         "# rays: rays the tracer traced (camera + reflected/refracted + shadow)",
         "# minray_rays: rays minray traces for the same image (both branches at every hit),",
-        "#   counted exactly by reference.minray.ray_count; ratio = minray_rays / rays",
+        "#   counted exactly by reference.teaching.minray.ray_count; ratio = minray_rays / rays",
         "# rays_per_level: the tracer's camera and reflected/refracted rays at levels 1, 2, ...",
         f"{'depth':>5} {'seconds':>9} {'rays':>12} {'minray_rays':>13} {'ratio':>8}  "
         "rays_per_level",
@@ -222,7 +222,7 @@ def _plot_runtimes(rows: list[SweepRow], path: Path, size: int) -> None:
 
 def light_paths(path: Path, size: int, picture: np.ndarray, mitsuba: bool) -> Path:
     """The DEPTH 5 picture with LE, LDE, LSE, LDSE trees and LDDE, LSDE examples (module doc)."""
-    from whitted.reference.paths import (
+    from whitted.reference.teaching.paths import (
         WANTED,
         draw,
         example_paths,

@@ -1,0 +1,2 @@
+"""Verdicts: the metrics, statistical tests and tolerances that judge two images
+(compare)."""
