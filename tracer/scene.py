@@ -51,10 +51,20 @@ from whitted.tracer.materials.textures import Checkerboard as Checkerboard
 from whitted.tracer.materials.textures import Texture as Texture
 from whitted.tracer.materials.textures import parse_texture, scalar_texture
 from whitted.tracer.materials.textures import texture_max as texture_max
-
-Vec3 = tuple[float, float, float]
-Color = tuple[float, float, float]
-Matrix = tuple[tuple[float, ...], ...]
+from whitted.tracer.settings import (
+    Matrix,
+    Table,
+    Vec3,
+    as_tuple,
+    check_distinct,
+    check_extent,
+    check_transform,
+    norm,
+    norm_or_1,
+    parse_steps,
+    read_points,
+    show,
+)
 
 # ---------------------------------------------------------------------------
 # The model
@@ -403,324 +413,6 @@ class Scene:
 # ---------------------------------------------------------------------------
 
 
-class _Table:
-    """A TOML table being read: remembers its key path and which keys were used."""
-
-    def __init__(self, path: str, key: str, data: Any, what: str = "a table",
-                 pattern: str | None = None):
-        self.path, self.key = path, key
-        #: the key path with NAME for user-chosen names and [0] for indices
-        self.pattern = key if pattern is None else pattern
-        self.kind: str | None = None  # the ``type`` read, once read
-        if not isinstance(data, dict):
-            self.fail("", f"expected {what}, got {_show(data)}")
-        self.data = data
-        self.used: set[str] = set()
-
-    def _k(self, key: str) -> str:
-        return f"{self.key}.{key}" if self.key and key else (self.key or key)
-
-    def _p(self, key: str) -> str:
-        return f"{self.pattern}.{key}" if self.pattern and key else (self.pattern or key)
-
-    def fail(self, key: str, message: str):
-        raise SceneError(self.path, self._k(key), message)
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str, default: Any = ..., required_what: str = "a value",
-            schema: dict | None = None) -> Any:
-        """The value of ``key`` as TOML gave it (``default`` when absent, ``...``: required).
-
-        ``schema`` is the JSON Schema of the values the caller accepts: the
-        helpers below pass their own, and :mod:`tracer.schema` builds the scene
-        format's schema from them (this table ignores it).
-        """
-        self.used.add(key)
-        if key not in self.data:
-            if default is ...:
-                self._unknown_first(key)
-                self.fail(key, f"missing; expected {required_what}")
-            return default
-        return self.data[key]
-
-    def _unknown_first(self, key: str) -> None:
-        """Before saying ``key`` is missing: a key this kind of table does not know (a
-        misspelling, or a key of another kind) is the likelier fault, and is named first."""
-        from whitted.tracer.schema import known_keys
-
-        known = known_keys(self.pattern, self.kind)
-        unknown = [k for k in self.data if k not in self.used and k not in known]
-        if known and unknown:
-            self.fail(unknown[0], f"unknown key (expected one of: {', '.join(sorted(known))}); "
-                                  f"{key} is missing")
-
-    def number(self, key: str, default: Any = ..., lo: float | None = None,
-               hi: float | None = None, lo_open: bool = False, hi_open: bool = False) -> float:
-        what = _range_text("a number", lo, hi, lo_open, hi_open)
-        v = self.raw(key, default, what, _number_schema(lo, hi, lo_open, hi_open))
-        return _check_number(self, key, v, what, lo, hi, lo_open, hi_open)
-
-    def integer(self, key: str, default: Any = ..., lo: int | None = None) -> int:
-        what = "an integer" + (f" >= {lo}" if lo is not None else "")
-        v = self.raw(key, default, what,
-                     {"type": "integer"} | ({"minimum": lo} if lo is not None else {}))
-        if isinstance(v, bool) or not isinstance(v, int):
-            self.fail(key, f"expected {what}, got {_show(v)}")
-        if lo is not None and v < lo:
-            self.fail(key, f"expected {what}, got {v}")
-        return v
-
-    def boolean(self, key: str, default: Any = ...) -> bool:
-        v = self.raw(key, default, "true or false", {"type": "boolean"})
-        if not isinstance(v, bool):
-            self.fail(key, f"expected true or false, got {_show(v)}")
-        return v
-
-    def string(self, key: str, default: Any = ..., choices: tuple[str, ...] | None = None) -> str:
-        what = "a string" if not choices else "one of: " + ", ".join(f'"{c}"' for c in choices)
-        v = self.raw(key, default, what,
-                     {"enum": list(choices)} if choices else {"type": "string"})
-        if not isinstance(v, str) or (choices and v not in choices):
-            self.fail(key, f"expected {what}, got {_show(v)}")
-        if key == "type":
-            self.kind = v
-        return v
-
-    def vec3(self, key: str, default: Any = ..., nonzero: bool = False) -> Vec3:
-        v = self.raw(key, default, "a list of 3 numbers", _VEC3_SCHEMA)
-        return _vec3(self, key, v, nonzero)
-
-    def direction(self, key: str, default: Any = ...) -> Vec3:
-        """A unit vector from a non-zero one (non-zero in float32)."""
-        return _unit(self, key, self.raw(key, default, "a list of 3 numbers", _VEC3_SCHEMA))
-
-    def distinct(self, key: str, a: Vec3, b: Vec3, other: str) -> None:
-        """Refuse b unless float32 tells it apart from a (see :func:`_distinct`)."""
-        _distinct(self, key, a, b, other)
-
-    def color(self, key: str, default: Any = ..., hi: float | None = None) -> Color:
-        what = "a colour: one number or a list of 3 numbers, each >= 0" + (
-            f" and <= {hi}" if hi is not None else "")
-        one = _number_schema(0, hi, False, False)
-        v = self.raw(key, default, what, {"anyOf": [
-            one, {"type": "array", "items": one, "minItems": 3, "maxItems": 3}]})
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            v = [v, v, v]
-        if not isinstance(v, list) or len(v) != 3:
-            self.fail(key, f"expected {what}, got {_show(v)}")
-        out = []
-        for i, x in enumerate(v):
-            if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-                self.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
-            if x < 0 or (hi is not None and x > hi):
-                self.fail(key, f"expected {what}, got {_show(v)}")
-            if x > FLOAT32_MAX:
-                self.fail(key, f"expected {what}, within float32's range (up to "
-                               f"{FLOAT32_MAX:.4g}), got {_show(v)}")
-            out.append(float(x))
-        return (out[0], out[1], out[2])
-
-    def table(self, key: str, default: Any = ..., parse: Any = None) -> Any:
-        """The sub-table ``key``; with ``parse``, what ``parse(sub-table)`` makes of it."""
-        v = self.raw(key, default, "a table", {"type": "object"})
-        sub = _Table(self.path, self._k(key), v, pattern=self._p(key))
-        return sub if parse is None else parse(sub)
-
-    def tables(self, key: str, parse: Any, what: str | None = None,
-               item_what: str = "a table") -> list:
-        """An array of tables (``[[key]]``), each made into ``parse(sub-table)``."""
-        what = what or f"an array of tables ([[{key}]])"
-        v = self.raw(key, [], what, {"type": "array"})
-        if not isinstance(v, list):
-            self.fail(key, f"expected {what}, got {_show(v)}")
-        return [parse(_Table(self.path, f"{self._k(key)}[{i}]", x, item_what,
-                             f"{self._p(key)}[0]")) for i, x in enumerate(v)]
-
-    def each(self, parse: Any) -> dict:
-        """Every key of this table, each a sub-table named by the user: ``parse(sub, name)``."""
-        out = {}
-        for name in list(self.data):
-            self.used.add(name)
-            out[name] = parse(_Table(self.path, self._k(name), self.data[name],
-                                     pattern=self._p("NAME")), name)
-        return out
-
-    def is_table(self, key: str) -> bool:
-        """Whether ``key`` holds a table (a texture rather than a colour, say)."""
-        return isinstance(self.data.get(key), dict)
-
-    def choose(self, options: tuple[str, ...], noun: str) -> str:
-        """The one key of this table, which names which of ``options`` it is (a step's
-        ``translate``, a texture's ``checkerboard``)."""
-        keys = list(self.data)
-        if len(keys) != 1:
-            self.fail("", f"expected exactly one of {', '.join(options)} in a {noun}, "
-                          f"got {', '.join(keys) or 'none'}")
-        if keys[0] not in options:
-            self.fail(keys[0], f"unknown {noun} (expected one of: {', '.join(options)})")
-        return keys[0]
-
-    def finish(self, allowed_note: str = ""):
-        """Refuse keys that were never read: a typo must not be silently ignored."""
-        unknown = [k for k in self.data if k not in self.used]
-        if unknown:
-            known = ", ".join(sorted(self.used))
-            self.fail(unknown[0], f"unknown key (expected one of: {known}){allowed_note}")
-
-
-def _show(v: Any, depth: int = 0) -> str:
-    """A value as the message shows it: strings escaped, long lists cut (a few elements)."""
-    if isinstance(v, float) and math.isnan(v):
-        return "nan"
-    if isinstance(v, str):
-        text = v if len(v) <= 60 else v[:60] + "..."
-        return '"' + text.encode("unicode_escape").decode("ascii").replace('"', '\\"') + '"'
-    if isinstance(v, dict):
-        return "a table"
-    if isinstance(v, bool):
-        return "true" if v else "false"
-    if isinstance(v, list):
-        if depth >= 2:
-            return "[...]"
-        items = [_show(x, depth + 1) for x in v[:6]]
-        more = f", ... ({len(v):,} elements)" if len(v) > 6 else ""
-        return "[" + ", ".join(items) + more + "]"
-    return repr(v)
-
-
-def _number_schema(lo, hi, lo_open, hi_open) -> dict:
-    """The JSON Schema of the numbers ``_range_text`` describes."""
-    out: dict = {"type": "number"}
-    if lo is not None:
-        out["exclusiveMinimum" if lo_open else "minimum"] = lo
-    if hi is not None:
-        out["exclusiveMaximum" if hi_open else "maximum"] = hi
-    return out
-
-
-_VEC3_SCHEMA = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
-
-
-def _range_text(base: str, lo, hi, lo_open, hi_open) -> str:
-    parts = []
-    if lo is not None:
-        parts.append(f"{'>' if lo_open else '>='} {lo:g}")
-    if hi is not None:
-        parts.append(f"{'<' if hi_open else '<='} {hi:g}")
-    return base + (" " + " and ".join(parts) if parts else "")
-
-
-#: The tracer computes in float32: the largest finite value and the smallest normal one.
-FLOAT32_MAX = float(np.finfo(np.float32).max)
-FLOAT32_TINY = float(np.finfo(np.float32).tiny)
-#: Largest coordinate (and inverse scale) of the world: intersection tests square
-#: coordinates and sum three squares, which must stay below FLOAT32_MAX (3 x 2^120 < 2^128).
-COORD_MAX = float(2.0**60)
-#: Largest ratio of a transform's largest to smallest scale (its condition number): float32
-#: round-trips a point through the transform and its inverse within about that many ulps.
-COND_MAX = 1e6
-
-
-def _check_number(t: _Table, key: str, v, what, lo, hi, lo_open, hi_open) -> float:
-    if isinstance(v, bool) or not isinstance(v, (int, float)):
-        t.fail(key, f"expected {what}, got {_show(v)}")
-    if not math.isfinite(v):
-        t.fail(key, f"expected a finite number ({what}), got {_show(v)}")
-    if abs(v) > FLOAT32_MAX:
-        t.fail(key, f"expected {what} within float32's range (up to {FLOAT32_MAX:.4g}), "
-                    f"got {v:g}")
-    # The bounds must hold for the float32 value the tracer uses, too (1e-200 > 0 is 0).
-    v32 = float(np.float32(v))
-    for x in (v, v32):
-        if lo is not None and (x <= lo if lo_open else x < lo):
-            t.fail(key, f"expected {what}, got {v:g}" + (" (0 in float32)" if x == 0 != v
-                                                           else ""))
-        if hi is not None and (x >= hi if hi_open else x > hi):
-            t.fail(key, f"expected {what}, got {v:g}")
-    return float(v)
-
-
-def _vec3(t: _Table, key: str, v, nonzero: bool = False) -> Vec3:
-    what = "a list of 3 finite numbers"
-    if not isinstance(v, list) or len(v) != 3:
-        got = f"a list of {len(v):,}" if isinstance(v, list) else _show(v)
-        t.fail(key, f"expected {what}, got {got}")
-    for i, x in enumerate(v):
-        if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
-            t.fail(key, f"expected {what}, got {_show(v)} (element {i} is {_show(x)})")
-        if abs(x) > FLOAT32_MAX:
-            t.fail(key, f"expected numbers within float32's range (up to {FLOAT32_MAX:.4g}), "
-                        f"got {_show(v)}")
-    out = (float(v[0]), float(v[1]), float(v[2]))
-    if nonzero and max(abs(x) for x in out) < FLOAT32_TINY:
-        t.fail(key, f"expected a non-zero vector, got {_show(v)} (zero in float32)")
-    return out
-
-
-def _norm_or_1(v) -> float:
-    n = _norm(v)
-    return n if n > 0 else 1.0
-
-
-def _norm(v) -> float:
-    """Euclidean length without underflow or overflow (scaled by the largest component)."""
-    a = np.asarray(v, dtype=np.float64)
-    m = float(np.max(np.abs(a)))
-    return 0.0 if m == 0 else m * float(np.linalg.norm(a / m))
-
-
-def _unit(t: _Table, key: str, v) -> Vec3:
-    """A direction: non-zero in float32 (relative to nothing: any scale is a direction)."""
-    d = np.asarray(_vec3(t, key, v, nonzero=True))
-    d = d / np.max(np.abs(d))
-    d = d / np.linalg.norm(d)
-    return (float(d[0]), float(d[1]), float(d[2]))
-
-
-def _distinct(t: _Table, key: str, a, b, other: str) -> np.ndarray:
-    """b - a, refused unless float32 tells the two points apart with room to spare.
-
-    Relative test: the difference must exceed 2^-20 of the points' magnitude
-    (16 float32 ulps), so that the direction a -> b is known to about 1e-6.
-    """
-    d = np.subtract(b, a)
-    scale = max(float(np.max(np.abs(a))), float(np.max(np.abs(b))))
-    if float(np.max(np.abs(d))) <= max(scale * 2.0**-20, FLOAT32_TINY):
-        t.fail(key, f"expected a point different from {other} "
-                    "(in float32 the two are the same or too close)")
-    return d
-
-
-def _check_extent(t: _Table, key: str, points, what: str = "coordinates") -> None:
-    """World coordinates within COORD_MAX, where float32 intersection tests stay finite."""
-    m = float(np.max(np.abs(points))) if np.size(points) else 0.0
-    if not m <= COORD_MAX:
-        t.fail(key, f"{what} reach {m:.3g}, beyond the {COORD_MAX:.3g} that float32 "
-                    "intersection tests can square")
-
-
-def _check_transform(t: _Table, key: str, m: np.ndarray, what: str = "transform") -> None:
-    """An affine transform float32 can apply and invert: relative tests on its scales.
-
-    Its singular values (the scales along its principal axes) must lie within
-    [1 / COORD_MAX, COORD_MAX] and their ratio (the condition number) within
-    COND_MAX; a NaN anywhere fails both. A uniform scale of 1e-5 passes, a
-    rotation about an axis that underflows, or [1, 1, 1e-12], does not.
-    """
-    if not np.isfinite(m).all():
-        t.fail(key, f"expected a finite {what} (it has NaN or infinite entries)")
-    _check_extent(t, key, m[:3, 3], "its translation")
-    sv = np.linalg.svd(m[:3, :3], compute_uv=False)
-    if not (sv[-1] > 0 and 1 / COORD_MAX <= sv[-1] and sv[0] <= COORD_MAX):
-        t.fail(key, f"expected an invertible {what} with scales between {1 / COORD_MAX:.3g} "
-                    f"and {COORD_MAX:.3g} (its scales range from {sv[-1]:.3g} to {sv[0]:.3g})")
-    if sv[0] / sv[-1] > COND_MAX:
-        t.fail(key, f"expected an invertible {what}: its scales range from {sv[-1]:.3g} to "
-                    f"{sv[0]:.3g}, a ratio beyond the {COND_MAX:.0g} float32 can invert")
-
-
 SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
                "mesh", "cube", "instance")
 #: Material ``type``s: the registry of tracer/materials/.
@@ -831,10 +523,10 @@ def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     """Validate an already parsed TOML document (see :func:`load_scene`)."""
     _check_nesting(path, data)
-    return _parse_top(_Table(path, "", data))
+    return _parse_top(Table(path, "", data))
 
 
-def _parse_top(top: _Table) -> Scene:
+def _parse_top(top: Table) -> Scene:
     """The whole document (also run by :mod:`tracer.schema` to derive the format's schema)."""
     description = top.string("description", "")
     film = top.table("film", {}, parse=_parse_film)
@@ -852,12 +544,12 @@ def _parse_top(top: _Table) -> Scene:
                  groups=groups)
 
 
-def _parse_materials(t: _Table) -> dict[str, Material]:
+def _parse_materials(t: Table) -> dict[str, Material]:
     return t.each(_parse_material)
 
 
-def _parse_groups(t: _Table, materials: dict[str, Material], base: Path) -> dict[str, tuple]:
-    def group(g: _Table, name: str) -> tuple:
+def _parse_groups(t: Table, materials: dict[str, Material], base: Path) -> dict[str, tuple]:
+    def group(g: Table, name: str) -> tuple:
         members = g.tables("shapes", lambda m: _parse_shape(m, materials, {}, base,
                                                             in_group=True))
         if not members:
@@ -867,21 +559,21 @@ def _parse_groups(t: _Table, materials: dict[str, Material], base: Path) -> dict
     return t.each(group)
 
 
-def _parse_compare(t: _Table) -> list[str]:
+def _parse_compare(t: Table) -> list[str]:
     what = "a list of: " + ", ".join(f'"{x}"' for x in TRACER_ONLY)
     tracer_only = t.raw("tracer_only", [], what,
                         {"type": "array", "items": {"enum": list(TRACER_ONLY)}})
     if not isinstance(tracer_only, list):
-        t.fail("tracer_only", f"expected {what}, got {_show(tracer_only)}")
+        t.fail("tracer_only", f"expected {what}, got {show(tracer_only)}")
     for i, x in enumerate(tracer_only):
         if x not in TRACER_ONLY:
             known = ", ".join(f'"{part}"' for part in TRACER_ONLY)
-            t.fail(f"tracer_only[{i}]", f"expected one of: {known}, got {_show(x)}")
+            t.fail(f"tracer_only[{i}]", f"expected one of: {known}, got {show(x)}")
     t.finish()
     return tracer_only
 
 
-def _parse_film(t: _Table) -> Film:
+def _parse_film(t: Table) -> Film:
     d = Film()
     if t.has("depth") and t.has("max_depth"):
         t.fail("depth", "give either depth (Heckbert's DEPTH) or max_depth (= depth + 1), "
@@ -898,7 +590,7 @@ def _parse_film(t: _Table) -> Film:
         t.fail("stddev", 'stddev is for filter = "gaussian"')
     jitter = t.raw("jitter", d.jitter)
     if not isinstance(jitter, bool):
-        t.fail("jitter", f"expected true or false, got {_show(jitter)}")
+        t.fail("jitter", f"expected true or false, got {show(jitter)}")
     film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
                 spp=t.integer("spp", d.spp, lo=1), max_depth=max_depth, filter=flt,
                 stddev=stddev, jitter=jitter)
@@ -906,31 +598,31 @@ def _parse_film(t: _Table) -> Film:
     return film
 
 
-def _parse_camera(t: _Table) -> Camera:
+def _parse_camera(t: Table) -> Camera:
     kind = t.string("type", "perspective", CAMERA_TYPES)
     matrix = None
     if t.has("to_world"):
         given = [k for k in ("origin", "target", "up") if t.has(k)]
         if given:
             t.fail(given[0], "give either to_world or origin/target/up, not both")
-        m = _parse_steps(t, "to_world")
+        m = parse_steps(t, "to_world")
         if kind == "perspective" and not _orthonormal(m[:3, :3]):
             t.fail("to_world", "a perspective camera's to_world may rotate, mirror and "
                                "translate, not scale or shear (its rays would not be unit)")
-        matrix = _as_tuple(m)
+        matrix = as_tuple(m)
         origin = tuple(float(x) for x in m[:3, 3])
-        f = m[:3, 2] / _norm(m[:3, 2])
+        f = m[:3, 2] / norm(m[:3, 2])
         target = tuple(float(x) for x in m[:3, 3] + f)
-        up = tuple(float(x) for x in m[:3, 1] / _norm(m[:3, 1]))
+        up = tuple(float(x) for x in m[:3, 1] / norm(m[:3, 1]))
     else:
         if not t.has("origin"):
-            t._unknown_first("origin")  # a misspelt key is the likelier fault
+            t.unknown_first("origin")  # a misspelt key is the likelier fault
             t.fail("origin", "missing; expected a list of 3 numbers (or give to_world instead "
                              "of origin/target/up)")
         origin, target = t.vec3("origin"), t.vec3("target")
         up = t.vec3("up", [0.0, 1.0, 0.0], nonzero=True)
-        forward = _distinct(t, "target", origin, target, "camera.origin")
-        f_unit, up_unit = forward / _norm(forward), np.asarray(up) / _norm(up)
+        forward = check_distinct(t, "target", origin, target, "camera.origin")
+        f_unit, up_unit = forward / norm(forward), np.asarray(up) / norm(up)
         if np.linalg.norm(np.cross(f_unit, up_unit)) <= 1e-6:
             t.fail("up", "expected a direction not parallel to target - origin")
     near = t.number("near_clip", 1e-2, lo=0, lo_open=True)
@@ -948,7 +640,7 @@ def _parse_camera(t: _Table) -> Camera:
         if matrix is not None:  # the view is [-1, 1]^2 in camera space, scaled by to_world
             if t.has("width"):
                 t.fail("width", "give either width or a to_world that scales the view, not both")
-            width = 2 * _norm(np.asarray(matrix)[:3, 0])
+            width = 2 * norm(np.asarray(matrix)[:3, 0])
         else:
             width = t.number("width", lo=0, lo_open=True)
         cam = Camera("orthographic", origin, target, up, width=width, near_clip=near,
@@ -965,7 +657,7 @@ def _orthonormal(a: np.ndarray, tol: float = 1e-5) -> bool:
     return bool(np.allclose(a.T @ a, np.eye(3), atol=tol))
 
 
-def _pixel_offset(t: _Table) -> tuple[float, float]:
+def _pixel_offset(t: Table) -> tuple[float, float]:
     """``pixel_offset = [dx, dy]``: the pixel grid's samples moved by (dx, dy) pixels."""
     what = "[dx, dy]: two numbers from -1 to 1 (pixels)"
     one = {"type": "number", "minimum": -1, "maximum": 1}
@@ -974,7 +666,7 @@ def _pixel_offset(t: _Table) -> tuple[float, float]:
     if (not isinstance(v, list) or len(v) != 2 or
             any(isinstance(x, bool) or not isinstance(x, (int, float)) or
                 not math.isfinite(x) or abs(x) > 1 for x in v)):
-        t.fail("pixel_offset", f"expected {what}, got {_show(v)}")
+        t.fail("pixel_offset", f"expected {what}, got {show(v)}")
     return (float(v[0]), float(v[1]))
 
 
@@ -982,7 +674,7 @@ def _pixel_offset(t: _Table) -> tuple[float, float]:
 _texture = parse_texture
 
 
-def _parse_material(t: _Table, name: str) -> Material:
+def _parse_material(t: Table, name: str) -> Material:
     kind = t.string("type", choices=tuple(_materials.REGISTRY))
     m = _materials.REGISTRY[kind].parse(t, name)
     opacity = 1.0
@@ -994,82 +686,20 @@ def _parse_material(t: _Table, name: str) -> Material:
     return replace(m, mask_opacity=opacity) if opacity != 1 else m
 
 
-def _parse_emitter(t: _Table) -> AreaEmitter:
+def _parse_emitter(t: Table) -> AreaEmitter:
     emitter = _area.parse(t)
     t.finish()
     return emitter
 
 
-def _parse_light(t: _Table) -> Light:
+def _parse_light(t: Table) -> Light:
     kind = t.string("type", choices=tuple(_emitters.LIGHTS))
     light = _emitters.LIGHTS[kind].parse(t)
     t.finish()
     return light
 
 
-#: The kinds of a ``to_world`` step, each the one key of its table.
-STEPS = ("translate", "scale", "rotate", "matrix")
-
-
-def _parse_steps(t: _Table, key: str) -> np.ndarray:
-    if t.is_table(key):  # one step given as a table: { matrix = [...] }
-        mats = [_parse_step(t.table(key))]
-    else:
-        mats = t.tables(key, _parse_step,
-                        "a list of steps like [{ translate = [x, y, z] }]",
-                        "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
-                        "{ matrix = [[..] x4] }")
-    m = tf.compose(mats)
-    _check_transform(t, key, m)
-    return m
-
-
-def _parse_step(s: _Table) -> np.ndarray:
-    op = s.choose(STEPS, "step")
-    if op == "translate":
-        m = tf.translate(s.vec3("translate"))
-    elif op == "scale":
-        v = s.raw("scale", ..., "a number or a list of 3 numbers",
-                  {"anyOf": [{"type": "number"}, _VEC3_SCHEMA]})
-        if isinstance(v, (int, float)) and not isinstance(v, bool):
-            v = [v, v, v]
-        sv = _vec3(s, "scale", v)
-        if any(abs(x) < FLOAT32_TINY for x in sv):
-            s.fail("scale", f"expected non-zero scale factors, got {_show(v)} "
-                            "(a factor is zero in float32)")
-        m = tf.scale(sv)
-    elif op == "rotate":
-        r = s.table("rotate")
-        axis = r.direction("axis")
-        m = tf.rotate(axis, r.number("angle"))
-        r.finish()
-    else:
-        row = {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4}
-        v = s.raw("matrix", ..., "4 rows of 4 numbers (or 16 numbers, row by row)",
-                  {"anyOf": [{"type": "array", "items": row, "minItems": 4, "maxItems": 4},
-                             {"type": "array", "items": {"type": "number"},
-                              "minItems": 16, "maxItems": 16}]})
-        if isinstance(v, list) and len(v) == 16 and not any(isinstance(x, list) for x in v):
-            v = [v[0:4], v[4:8], v[8:12], v[12:16]]  # 16 numbers, row by row (Mitsuba's)
-        if (not isinstance(v, list) or len(v) != 4 or
-                any(not isinstance(row, list) or len(row) != 4 for row in v)):
-            s.fail("matrix", "expected 4 rows of 4 numbers (or 16 numbers, row by row)")
-        flat = [x for row in v for x in row]
-        if any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
-               for x in flat):
-            s.fail("matrix", "expected 4 rows of 4 finite numbers")
-        m = np.asarray(v, dtype=np.float64)
-        if not np.allclose(m[3], [0, 0, 0, 1]):
-            s.fail("matrix", "expected an affine matrix (last row [0, 0, 0, 1])")
-    s.finish()
-    return m
-
-
-def _as_tuple(m: np.ndarray) -> Matrix:
-    return tuple(tuple(float(x) for x in row) for row in m)
-
-
-def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
+def _parse_shape(t: Table, materials: dict[str, Material], groups: dict,
                  base: Path, in_group: bool = False) -> Shape:
     kind = t.string("type", choices=SHAPE_TYPES)
     if in_group and kind == "instance":
@@ -1093,7 +723,7 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
             t.fail("material", f'unknown material "{material}" (defined: {known})')
     else:
         material = None  # a pure emitter: black, reflects nothing
-    m = _parse_steps(t, "to_world")
+    m = parse_steps(t, "to_world")
     if kind == "sphere":
         center = np.asarray(t.vec3("center", [0.0, 0.0, 0.0]))
         radius = t.number("radius", 1.0, lo=0, lo_open=True)
@@ -1102,30 +732,30 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
                                "positive scales (the result must stay a sphere)")
         scale = float(np.linalg.norm(m[:3, 0]))
         shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
-                       material, emitter, _as_tuple(m[:3, :3] / scale))
-        _check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
+                       material, emitter, as_tuple(m[:3, :3] / scale))
+        check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
     elif kind == "rectangle":
-        shape = Rectangle(_as_tuple(m), material, emitter)
+        shape = Rectangle(as_tuple(m), material, emitter)
     elif kind == "disk":
-        shape = Disk(_as_tuple(m), material, emitter)
+        shape = Disk(as_tuple(m), material, emitter)
     elif kind == "triangle":
-        verts = _points(t, "vertices", m, exactly=3)
+        verts = read_points(t, "vertices", m, exactly=3)
         e1, e2 = verts[1] - verts[0], verts[2] - verts[0]
         # Relative: the sine of the angle between the edges, as float32 can resolve it.
-        if not _norm(np.cross(e1 / _norm_or_1(e1), e2 / _norm_or_1(e2))) > 2.0**-23:
+        if not norm(np.cross(e1 / norm_or_1(e1), e2 / norm_or_1(e2))) > 2.0**-23:
             t.fail("vertices", "expected a triangle with non-zero area "
                                "(the vertices are collinear, or nearly so for float32)")
         shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
     elif kind == "polygon":
-        verts = _points(t, "vertices", m)
+        verts = read_points(t, "vertices", m)
         _check_polygon(t, verts)
         shape = Polygon(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
     elif kind == "cylinder":
         p0, p1 = t.vec3("p0", [0.0, 0.0, 0.0]), t.vec3("p1", [0.0, 0.0, 1.0])
         t.distinct("p1", p0, p1, "p0")
-        shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), _as_tuple(m),
+        shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), as_tuple(m),
                          material, emitter)
-        _check_transform(t, "radius", shape.local_to_world(),
+        check_transform(t, "radius", shape.local_to_world(),
                          "placement (radius against length)")
         lin = shape.local_to_world()[:3, :3]
         x, y, z = lin[:, 0], lin[:, 1], lin[:, 2]
@@ -1138,20 +768,20 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
     elif kind == "paraboloid":
         shape = Paraboloid(t.number("a", 1.0, lo=0, lo_open=True),
                            t.number("b", 1.0, lo=0, lo_open=True),
-                           t.number("height", 1.0, lo=0, lo_open=True), _as_tuple(m),
+                           t.number("height", 1.0, lo=0, lo_open=True), as_tuple(m),
                            material, emitter)
         h = math.sqrt(shape.height)
-        _check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
+        check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
                          "shape (a, b and height against each other)")
     elif kind == "mesh":
         shape = _parse_mesh(t, m, material, emitter, base)
     elif kind == "cube":
         verts, faces, uvs = cube_mesh()
         world = tf.apply_point(m, verts)
-        _check_extent(t, "to_world", world, "vertices")
-        shape = Cube("cube", False, world, faces, None, uvs, _as_tuple(m), material, emitter)
+        check_extent(t, "to_world", world, "vertices")
+        shape = Cube("cube", False, world, faces, None, uvs, as_tuple(m), material, emitter)
     else:
-        shape = Instance(group, _as_tuple(m))
+        shape = Instance(group, as_tuple(m))
     if material is not None:  # a material may make a light of its shape (light_of)
         try:
             light = materials[material].light_of(shape)
@@ -1164,20 +794,7 @@ def _parse_shape(t: _Table, materials: dict[str, Material], groups: dict,
     return shape
 
 
-def _points(t: _Table, key: str, m: np.ndarray, exactly: int | None = None) -> list:
-    what = (f"a list of {exactly} vertices [[x, y, z], ...]" if exactly
-            else "a list of at least 3 vertices [[x, y, z], ...]")
-    counts = {"minItems": exactly, "maxItems": exactly} if exactly else {"minItems": 3}
-    v = t.raw(key, ..., what, {"type": "array", "items": _VEC3_SCHEMA} | counts)
-    if not isinstance(v, list) or (len(v) != exactly if exactly else len(v) < 3):
-        got = f"a list of {len(v)}" if isinstance(v, list) else _show(v)
-        t.fail(key, f"expected {what}, got {got}")
-    pts = [tf.apply_point(m, _vec3(t, f"{key}[{i}]", p)) for i, p in enumerate(v)]
-    _check_extent(t, key, np.asarray(pts), "vertices")
-    return pts
-
-
-def _check_polygon(t: _Table, verts: list) -> None:
+def _check_polygon(t: Table, verts: list) -> None:
     """Planar, not degenerate and simple (no edge crosses another)."""
     from whitted.tracer.shapes.polygon import plane_frame, self_intersects
 
@@ -1195,7 +812,7 @@ def _check_polygon(t: _Table, verts: list) -> None:
         t.fail("vertices", "expected a simple polygon (two of its edges cross)")
 
 
-def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh:
+def _parse_mesh(t: Table, m: np.ndarray, material, emitter, base: Path) -> Mesh:
     from whitted.tracer.meshio import MeshError, compute_vertex_normals, load_mesh
 
     name = t.string("file")
@@ -1208,7 +825,7 @@ def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh
     except MeshError as e:
         t.fail("file", str(e))
     verts = tf.apply_point(m, data.vertices)
-    _check_extent(t, "file", verts, "vertices")
+    check_extent(t, "file", verts, "vertices")
     normals = None
     if smooth:
         if data.normals is not None:  # normals transform by the inverse transpose
@@ -1217,4 +834,4 @@ def _parse_mesh(t: _Table, m: np.ndarray, material, emitter, base: Path) -> Mesh
             normals = compute_vertex_normals(verts, data.faces)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
-                _as_tuple(m), material, emitter)
+                as_tuple(m), material, emitter)

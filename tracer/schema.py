@@ -3,9 +3,9 @@
 :func:`scene_schema` runs the loader's own parsers (``tracer/scene.py`` and
 every kind's ``parse`` in ``tracer/materials/`` and ``tracer/emitters/``) on a
 *recording* table, :class:`_Recorder`, instead of a scene. Each key a parser
-reads goes through one of the ``_Table`` helpers (``number``, ``color``,
+reads goes through one of the ``Table`` helpers (``number``, ``color``,
 ``vec3``, ``string``, ``table``, ...), and each helper hands
-``_Table.raw`` the JSON Schema of the values it accepts; the recorder notes
+``Table.raw`` the JSON Schema of the values it accepts; the recorder notes
 the key, that schema, its default and whether it was required, and answers
 with a plausible value so that the parser goes on to its next key. Where a
 parser branches (on a ``type``, on whether a key is present, on a colour
@@ -34,6 +34,7 @@ from typing import Any
 import numpy as np
 
 from whitted.tracer import scene as _scene
+from whitted.tracer.settings import Table
 
 #: The most runs of one parser while exploring its branches: far above what the kinds
 #: need (a shape takes 26), a guard against a parser whose branches multiply.
@@ -138,7 +139,7 @@ def _explore(parse, make) -> tuple[list[_Record], Any]:
     raise TooManyRuns(f"a parser branches more than {MAX_RUNS} ways; see tracer/schema.py")
 
 
-#: Every key a table may have, by its key pattern (``_Table.pattern``) and its ``type``
+#: Every key a table may have, by its key pattern (``Table.pattern``) and its ``type``
 #: (None: any type): filled as a side effect of recording, for the loader's messages.
 _VOCABULARY: dict[tuple[str, str | None], set[str]] = {}
 
@@ -152,8 +153,8 @@ def known_keys(pattern: str, kind: str | None = None) -> frozenset[str]:
     return frozenset(keys)
 
 
-class _Recorder(_scene._Table):
-    """A ``_Table`` that records what is read of it instead of reading a scene."""
+class _Recorder(Table):
+    """A ``Table`` that records what is read of it instead of reading a scene."""
 
     def __init__(self, run: _Run, path: str = "<schema>", key: str = ""):
         self.path, self.key, self.pattern, self.run = path, key, key, run

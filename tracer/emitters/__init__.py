@@ -2,8 +2,8 @@
 
 A kind's module (e.g. :mod:`tracer.emitters.point`) holds ``MODEL`` (its
 scene-model dataclass, a :class:`~tracer.emitters.base.LightModel`),
-``parse(table)`` (the ``[[lights]]`` table, read with the ``_Table`` helpers
-of :mod:`tracer.scene`) and ``Emitter`` (a :class:`~tracer.emitters.base.Emitter`
+``parse(table)`` (the ``[[lights]]`` table, read through a
+:class:`~tracer.settings.Table`) and ``Emitter`` (a :class:`~tracer.emitters.base.Emitter`
 built once per scene). Area emitters on shapes are :mod:`tracer.emitters.area`.
 Adding a kind is one module and one line in :data:`LIGHTS` here, and one of
 each in ``reference/emitters/`` for its Mitsuba conversion

@@ -20,16 +20,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from whitted.tracer import faults
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -43,7 +40,7 @@ class AreaEmitter:
     radiance: Color  # W/(m^2 sr), emitted from the front side
 
 
-def parse(t: _Table) -> AreaEmitter:
+def parse(t: Table) -> AreaEmitter:
     return AreaEmitter(t.color("radiance"))
 
 

@@ -14,12 +14,9 @@ emitter of ``reference/emitters/background.py``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 Color = tuple[float, float, float]
 
@@ -32,7 +29,7 @@ class Background(base.LightModel):
 MODEL = Background
 
 
-def parse(t: _Table) -> Background:
+def parse(t: Table) -> Background:
     return Background(t.color("radiance"))
 
 

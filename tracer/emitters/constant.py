@@ -13,13 +13,10 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred, jit
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -35,7 +32,7 @@ class ConstantLight(base.LightModel):
 MODEL = ConstantLight
 
 
-def parse(t: _Table) -> ConstantLight:
+def parse(t: Table) -> ConstantLight:
     return ConstantLight(t.color("radiance"))
 
 

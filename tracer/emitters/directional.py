@@ -9,13 +9,10 @@ same (``reference/emitters/directional.py``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 lights = deferred("whitted.tracer.lights")
 
@@ -32,7 +29,7 @@ class DirectionalLight(base.LightModel):
 MODEL = DirectionalLight
 
 
-def parse(t: _Table) -> DirectionalLight:
+def parse(t: Table) -> DirectionalLight:
     return DirectionalLight(t.direction("direction"), t.color("irradiance"))
 
 

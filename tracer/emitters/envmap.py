@@ -20,15 +20,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from whitted.tracer.backend import deferred, jit, upload_rows
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table, as_tuple, parse_steps
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -49,14 +46,13 @@ class EnvMap(base.LightModel):
 MODEL = EnvMap
 
 
-def parse(t: _Table) -> EnvMap:
+def parse(t: Table) -> EnvMap:
     from whitted.tracer.materials.textures import load_bitmap
-    from whitted.tracer.scene import _as_tuple, _parse_steps
 
     # Every key is read before the file is (the schema records the keys a parser reads).
     path = (Path(t.path).parent / t.string("filename")).resolve()
     scale = t.number("scale", 1.0, lo=0)
-    m = _parse_steps(t, "to_world") if t.has("to_world") else np.eye(4)
+    m = parse_steps(t, "to_world") if t.has("to_world") else np.eye(4)
     r = np.asarray(m)[:3, :3]
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-5):
         t.fail("to_world", "an environment map's to_world must be a rotation")
@@ -65,7 +61,7 @@ def parse(t: _Table) -> EnvMap:
         t.fail("filename", f"{path.name}: an environment map needs at least 2 rows")
     if not np.isfinite(texels).all() or texels.min() < 0:
         t.fail("filename", f"{path.name}: texel values must be finite and >= 0")
-    return EnvMap(str(path), texels, scale, _as_tuple(m))
+    return EnvMap(str(path), texels, scale, as_tuple(m))
 
 
 class Emitter(base.Emitter):

@@ -8,13 +8,10 @@ the same (``reference/emitters/point.py``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.emitters import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -32,7 +29,7 @@ class PointLight(base.LightModel):
 MODEL = PointLight
 
 
-def parse(t: _Table) -> PointLight:
+def parse(t: Table) -> PointLight:
     return PointLight(t.vec3("position"), t.color("intensity"))
 
 

@@ -15,16 +15,13 @@ the cutoff cone's square cross-section maps onto the unit uv square.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from whitted.tracer.backend import deferred, jit
 from whitted.tracer.emitters import base
 from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -61,7 +58,7 @@ class SpotLight(base.LightModel):
 MODEL = SpotLight
 
 
-def parse(t: _Table) -> SpotLight:
+def parse(t: Table) -> SpotLight:
     position, target = t.vec3("position"), t.vec3("target")
     t.distinct("target", position, target, "position")
     cutoff = t.number("cutoff_angle", 20.0, lo=0, hi=180, lo_open=True, hi_open=True)

@@ -5,8 +5,8 @@ A kind's module (e.g. :mod:`tracer.materials.diffuse`) holds
 * ``MODEL``: its scene-model dataclass, a :class:`~tracer.materials.base.MaterialModel`
   (re-exported by :mod:`tracer.scene` for the kinds that were there before);
 * ``parse(table, name)``: the ``[materials.NAME]`` table into a ``MODEL``,
-  through the ``_Table`` helpers of :mod:`tracer.scene` (which refuses the
-  keys it did not read, and the ``type`` key is read there);
+  read through a :class:`~tracer.settings.Table` (:mod:`tracer.scene` reads
+  the ``type`` key and refuses the keys the kind did not read);
 * ``BSDF``: its behaviour in the tracer, a :class:`~tracer.materials.base.BSDF`.
 
 Adding a kind is one new module and one line in :data:`REGISTRY`; its

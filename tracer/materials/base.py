@@ -27,8 +27,8 @@ kl > 0 are Heckbert's light spheres.
 
 A kind is one module of :mod:`tracer.materials` holding three things: its
 scene-model dataclass (a :class:`MaterialModel`), ``parse(table, name)``
-(the TOML ``[materials.NAME]`` table, read with the ``_Table`` helpers of
-:mod:`tracer.scene`), and ``BSDF``, a subclass of :class:`BSDF` built once per
+(the TOML ``[materials.NAME]`` table, read with a :class:`~tracer.settings.Table`,
+:mod:`tracer.settings`), and ``BSDF``, a subclass of :class:`BSDF` built once per
 scene from that kind's materials. It packs their parameters into Dr.Jit
 tables (row ``i`` = the kind's ``i``-th material), gathers a row per lane
 (:meth:`BSDF.params`) and evaluates (a), (b) and (c) on whole wavefronts. The
@@ -46,6 +46,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
+from whitted.tracer.settings import check_number, number_schema, range_text
 
 dr = deferred("drjit")
 
@@ -188,17 +189,16 @@ class BSDF:
 def parse_ior(t, key: str, default: float) -> float:
     """An index of refraction: a positive number or one of Mitsuba's names (``tracer.ior``)."""
     from whitted.tracer.ior import DIELECTRICS
-    from whitted.tracer.scene import _check_number, _number_schema, _range_text
 
-    number = _range_text("a number", 0, None, True, False)
+    number = range_text("a number", 0, None, True, False)
     v = t.raw(key, default, f"{number} or an IOR name",
-              {"anyOf": [_number_schema(0, None, True, False), {"enum": list(DIELECTRICS)}]})
+              {"anyOf": [number_schema(0, None, True, False), {"enum": list(DIELECTRICS)}]})
     if isinstance(v, str):
         if v not in DIELECTRICS:
             t.fail(key, f"unknown index of refraction {v!r} (a number, or one of "
                         f"{', '.join(DIELECTRICS)})")
         return DIELECTRICS[v]
-    return _check_number(t, key, v, number, 0, None, True, False)
+    return check_number(t, key, v, number, 0, None, True, False)
 
 
 def parse_two_sided(t) -> bool:

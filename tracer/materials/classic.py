@@ -67,10 +67,10 @@ from whitted.tracer import faults
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
 from whitted.tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
+from whitted.tracer.settings import Table
 
 if TYPE_CHECKING:
     from whitted.tracer.emitters.heckbert import HeckbertSphere
-    from whitted.tracer.scene import _Table
 
 dr = deferred("drjit")
 fresnel = deferred("whitted.tracer.fresnel")
@@ -121,7 +121,7 @@ class Classic(base.MaterialModel):
 MODEL = Classic
 
 
-def parse(t: _Table, name: str) -> Classic:
+def parse(t: Table, name: str) -> Classic:
     weight = {"lo": 0.0}
     return Classic(name, color=parse_texture(t, "color", 1.0, hi=None),
                    kd=t.number("kd", 0.0, **weight), ks=t.number("ks", 0.0, **weight),

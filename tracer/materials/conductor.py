@@ -14,14 +14,11 @@ Mitsuba's bare ``conductor`` is. Mitsuba's counterpart is ``conductor``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
 from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 fresnel = deferred("whitted.tracer.fresnel")
 
@@ -44,7 +41,7 @@ class Conductor(base.MaterialModel):
 MODEL = Conductor
 
 
-def parse(t: _Table, name: str) -> Conductor:
+def parse(t: Table, name: str) -> Conductor:
     from whitted.tracer.ior import CONDUCTORS
 
     if t.has("material") and (t.has("eta") or t.has("k")):

@@ -16,14 +16,11 @@ on the side the normal points away from, ``ext_ior`` the outside.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 from whitted.tracer import faults
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 fresnel = deferred("whitted.tracer.fresnel")
@@ -51,7 +48,7 @@ class Dielectric(base.MaterialModel):
 MODEL = Dielectric
 
 
-def parse(t: _Table, name: str) -> Dielectric:
+def parse(t: Table, name: str) -> Dielectric:
     return Dielectric(name, ior=base.parse_ior(t, "ior", 1.5),
                       ext_ior=base.parse_ior(t, "ext_ior", 1.0),
                       fresnel=t.string("fresnel", "exact", ("exact", "schlick")))

@@ -13,14 +13,11 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer import faults
 from whitted.tracer.materials import base
 from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 
 @dataclass(frozen=True)
@@ -35,7 +32,7 @@ class Diffuse(base.MaterialModel):
 MODEL = Diffuse
 
 
-def parse(t: _Table, name: str) -> Diffuse:
+def parse(t: Table, name: str) -> Diffuse:
     return Diffuse(name, parse_texture(t, "reflectance", 0.5), base.parse_two_sided(t))
 
 

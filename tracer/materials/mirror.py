@@ -11,13 +11,10 @@ counterpart is a two-sided ``conductor`` with ``material = "none"``
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 fresnel = deferred("whitted.tracer.fresnel")
 
@@ -33,7 +30,7 @@ class Mirror(base.MaterialModel):
 MODEL = Mirror
 
 
-def parse(t: _Table, name: str) -> Mirror:
+def parse(t: Table, name: str) -> Mirror:
     return Mirror(name, t.color("reflectance", 1.0, hi=1.0), base.parse_two_sided(t))
 
 

@@ -14,14 +14,11 @@ BSDF written in ``reference/materials/phong.py``.
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
 from whitted.tracer.materials.textures import Checkerboard, Texture, TextureTable, parse_texture
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 phong = deferred("whitted.tracer.phong")
@@ -55,7 +52,7 @@ class Phong(base.MaterialModel):
 MODEL = Phong
 
 
-def parse(t: _Table, name: str) -> Phong:
+def parse(t: Table, name: str) -> Phong:
     diffuse = parse_texture(t, "diffuse", 0.5)
     specular = t.color("specular", 0.2, hi=1.0)
     m = Phong(name, diffuse, specular,

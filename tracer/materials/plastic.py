@@ -19,14 +19,11 @@ as Mitsuba's bare ``plastic`` is.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
 from whitted.tracer.materials.textures import Texture, TextureTable, parse_texture
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 fresnel = deferred("whitted.tracer.fresnel")
@@ -52,7 +49,7 @@ class Plastic(base.MaterialModel):
 MODEL = Plastic
 
 
-def parse(t: _Table, name: str) -> Plastic:
+def parse(t: Table, name: str) -> Plastic:
     nonlinear = t.boolean("nonlinear", False)
     return Plastic(name, parse_texture(t, "diffuse_reflectance", 0.5),
                    parse_texture(t, "specular_reflectance", 1.0, hi=None),

@@ -13,15 +13,13 @@ import math
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 import numpy as np
 
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
 from whitted.tracer.materials.base import gather
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table, show
 
 dr = deferred("drjit")
 texture = deferred("whitted.tracer.texture")
@@ -78,7 +76,7 @@ def srgb_decode(v: np.ndarray) -> np.ndarray:
     return np.where(v <= 0.04045, v / 12.92, ((v + 0.055) / 1.055) ** 2.4)
 
 
-def load_bitmap(t: _Table, key: str, path: Path, raw: bool) -> np.ndarray:
+def load_bitmap(t: Table, key: str, path: Path, raw: bool) -> np.ndarray:
     """The texels of an image file (PNG or OpenEXR) as linear float32 RGB; one-line errors
     (the file is checked before it is decoded: :func:`tracer.imageio.read_texture_file`)."""
     from whitted.tracer.imageheader import ImageError
@@ -96,7 +94,7 @@ def load_bitmap(t: _Table, key: str, path: Path, raw: bool) -> np.ndarray:
     return (rgb if raw else srgb_decode(rgb)).astype(np.float32)
 
 
-def _parse_bitmap(bm: _Table, hi: float | None) -> Bitmap:
+def _parse_bitmap(bm: Table, hi: float | None) -> Bitmap:
     name = bm.string("filename")
     path = (Path(bm.path).parent / name).resolve()
     filter_type = bm.string("filter_type", "bilinear", ("bilinear", "nearest"))
@@ -112,7 +110,7 @@ def _parse_bitmap(bm: _Table, hi: float | None) -> Bitmap:
     return Bitmap(str(path), texels, filter_type, raw, wrap)
 
 
-def parse_texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Texture:
+def parse_texture(t: Table, key: str, default, hi: float | None = 1.0) -> Texture:
     """A colour, or a texture: a table whose one key names its kind (:data:`TEXTURES`),
     e.g. ``{ checkerboard = { color0, color1, scale } }``."""
     if not t.is_table(key):
@@ -124,9 +122,7 @@ def parse_texture(t: _Table, key: str, default, hi: float | None = 1.0) -> Textu
     return texture
 
 
-def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
-    from whitted.tracer.scene import _show
-
+def _parse_checkerboard(cb: Table, hi: float | None) -> Checkerboard:
     what = "a positive number or [su, sv]"
     positive = {"type": "number", "exclusiveMinimum": 0}
     sc = cb.raw("scale", 1.0, what, {"anyOf": [
@@ -136,7 +132,7 @@ def _parse_checkerboard(cb: _Table, hi: float | None) -> Checkerboard:
     if (not isinstance(sc, list) or len(sc) != 2 or
             any(isinstance(x, bool) or not isinstance(x, (int, float)) or
                 not math.isfinite(x) or x <= 0 for x in sc)):
-        cb.fail("scale", f"expected {what}, got {_show(sc)}")
+        cb.fail("scale", f"expected {what}, got {show(sc)}")
     board = Checkerboard(cb.color("color0", 0.4, hi=hi), cb.color("color1", 0.2, hi=hi),
                          (float(sc[0]), float(sc[1])))
     cb.finish()

@@ -12,13 +12,10 @@ names (``"bk7"``).
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
 
 from whitted.tracer.backend import deferred
 from whitted.tracer.materials import base
-
-if TYPE_CHECKING:
-    from whitted.tracer.scene import _Table
+from whitted.tracer.settings import Table
 
 dr = deferred("drjit")
 fresnel = deferred("whitted.tracer.fresnel")
@@ -33,7 +30,7 @@ class ThinDielectric(base.MaterialModel):
 MODEL = ThinDielectric
 
 
-def parse(t: _Table, name: str) -> ThinDielectric:
+def parse(t: Table, name: str) -> ThinDielectric:
     return ThinDielectric(name, ior=base.parse_ior(t, "ior", 1.5),
                           ext_ior=base.parse_ior(t, "ext_ior", 1.0))
 
