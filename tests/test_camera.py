@@ -56,12 +56,18 @@ def test_orthographic_rays_are_parallel(jit):
         math.hypot(6, 6 * 20 / 30), rel=1e-5)
 
 
-@pytest.mark.parametrize("kind", ["perspective", "orthographic"])
-def test_camera_rays_match_mitsubas_sensor(jit, mi, kind):
+@pytest.mark.parametrize("kind, fov_axis", [
+    ("perspective", "x"), ("orthographic", "x"),
+    # the film is not square, so each axis gives another horizontal field of view; Mitsuba
+    # is given fov and fov_axis as written and converts them itself (parse_fov)
+    ("perspective", "y"), ("perspective", "diagonal"), ("perspective", "smaller"),
+    ("perspective", "larger")])
+def test_camera_rays_match_mitsubas_sensor(jit, mi, kind, fov_axis):
     from whitted.reference.renderers.mitsuba.scene import sensor_tree, to_dict
     from whitted.tracer.scene import Film, Scene
 
-    cam = Camera(kind, (0.3, 1.5, 4), (0.1, 0.4, 0), (0, 1, 0), fov=50, width=3)
+    cam = Camera(kind, (0.3, 1.5, 4), (0.1, 0.4, 0), (0, 1, 0), fov=50, width=3,
+                 fov_axis=fov_axis)
     w, h = 40, 30
     scene = Scene("x", Film(w, h, 1, 2), cam, {}, (), ())
     sensor = mi.load_dict(to_dict(sensor_tree(scene), mi))
