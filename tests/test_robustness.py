@@ -579,6 +579,7 @@ def test_ctrl_c_inside_a_symbolic_loop_is_an_interrupt(tmp_path, monkeypatch, ca
     import drjit as dr
 
     from whitted.reference import cli
+    from whitted.reference.commands import render
     from whitted.tracer.backend import jit
 
     def body(i):
@@ -591,10 +592,10 @@ def test_ctrl_c_inside_a_symbolic_loop_is_an_interrupt(tmp_path, monkeypatch, ca
         raise RuntimeError("another failure")
 
     scene = write_scene(tmp_path, MINIMAL)
-    monkeypatch.setattr(cli, "cmd_render", interrupted)
+    monkeypatch.setattr(render, "run", interrupted)
     assert cli.main(["render", str(scene), "-o", str(tmp_path / "x.exr")]) == 130
     assert capsys.readouterr().err == "whitted: interrupted\n"
-    monkeypatch.setattr(cli, "cmd_render", failing)
+    monkeypatch.setattr(render, "run", failing)
     with pytest.raises(RuntimeError, match="another failure"):
         cli.main(["render", str(scene), "-o", str(tmp_path / "x.exr")])
 
