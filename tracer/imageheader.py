@@ -32,9 +32,16 @@ The headers, as their specifications define them:
 * PPM (netpbm's ``man 5 ppm``): ``P3`` or ``P6``, width, height and maxval
   as text, comments allowed between them; a ``.ppm.gz`` file's are read from
   the start of its decompressed stream.
+* JPEG (ITU-T T.81, annex B): SOI ``FF D8``, then marker segments ``FF xx``
+  with a big-endian length (which counts itself) up to the first frame header
+  SOFn (``C0``-``CF`` but ``C4`` DHT, ``C8`` JPG, ``CC`` DAC): precision,
+  height, width, components (1 grey, 3 YCbCr, 4 CMYK). The segments are
+  walked with seeks, so large APPn blocks (Exif, ICC profiles) before the
+  frame header are skipped unread. JPEG is read only where a reader asks for
+  it (bitmap textures and environment maps, as Mitsuba reads them); other
+  readers (``whitted check``) refuse it by name.
 
-There is no JPEG (or other) reader in the project: a ``.png`` texture that is
-a JPEG inside is refused by its first bytes.
+A ``.png`` texture that is a JPEG inside is refused by its first bytes.
 """
 
 from __future__ import annotations
@@ -56,10 +63,18 @@ from whitted.tracer.errors import UserError
 #: Formats by their first bytes (the magic numbers of their specifications).
 MAGIC = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"PF", "pfm"), (b"Pf", "pfm"),
          (b"#?RADIANCE", "hdr"), (b"#?RGBE", "hdr"), (b"P3", "ppm"), (b"P6", "ppm"),
-         (b"\x1f\x8b", "gz"))
+         (b"\x1f\x8b", "gz"), (b"\xff\xd8\xff", "jpeg"))
 
 FORMAT_NAMES = {"exr": "OpenEXR", "png": "PNG", "pfm": "PFM", "hdr": "Radiance HDR",
-                "ppm": "PPM"}
+                "ppm": "PPM", "jpeg": "JPEG"}
+
+#: The formats a reader takes unless it names others (JPEG only where asked for).
+DEFAULT_FORMATS = ("exr", "png", "pfm", "hdr", "ppm")
+
+#: JPEG frame headers (SOF0-SOF15 less DHT C4, JPG C8, DAC CC), ITU-T T.81 table B.1.
+_JPEG_SOF = frozenset(range(0xC0, 0xD0)) - {0xC4, 0xC8, 0xCC}
+#: Marker segments walked before the frame header is given up (a file of empty segments).
+JPEG_MAX_SEGMENTS = 4096
 
 #: How far into a file a text header (PFM, HDR, PPM: comments included) may reach.
 TEXT_HEADER_BYTES = 64 << 10
@@ -80,7 +95,7 @@ class ImageError(UserError):
 @dataclass(frozen=True)
 class ImageHeader:
     """What an image file's header says, read without decoding its pixels."""
-    #: "exr", "png", "pfm", "hdr" or "ppm"
+    #: "exr", "png", "pfm", "hdr", "ppm" or "jpeg"
     format: str
     width: int
     height: int
@@ -253,6 +268,51 @@ def _ppm(path, head: bytes, size: int, gz: bool) -> ImageHeader:
     return ImageHeader("ppm", w, h, 3, size, gzip=gz)
 
 
+def _jpeg(path, size: int) -> ImageHeader:
+    """The JPEG frame header (SOFn): walked to segment by segment from SOI."""
+    try:
+        with open(path, "rb") as f:
+            return _jpeg_frame(path, f, size)
+    except OSError as e:
+        raise ImageError(path, f"cannot read: {e.strerror or e}") from None
+    except (struct.error, EOFError):
+        raise ImageError(path, "unreadable JPEG file (it ends before its frame header)") \
+            from None
+
+
+def _jpeg_frame(path, f, size: int) -> ImageHeader:
+    f.seek(2)  # after SOI
+    for _ in range(JPEG_MAX_SEGMENTS):
+        if _exact(f, 1) != b"\xff":
+            raise ImageError(path, "unreadable JPEG file (a marker expected at byte "
+                                   f"{f.tell() - 1:,})")
+        marker = _exact(f, 1)[0]
+        while marker == 0xFF:  # fill bytes before a marker (T.81 B.1.1.2)
+            marker = _exact(f, 1)[0]
+        if marker in (0x01, *range(0xD0, 0xD8)):  # TEM, RSTn: no length
+            continue
+        if marker in (0xD9, 0xDA):  # EOI, SOS: no frame header before the image data
+            raise ImageError(path, "unreadable JPEG file (no frame header before its "
+                                   "image data)")
+        (length,) = struct.unpack(">H", _exact(f, 2))
+        if length < 2 or f.tell() + length - 2 > size:
+            raise ImageError(path, f"unreadable JPEG file (a segment of {length:,} bytes at "
+                                   f"byte {f.tell() - 4:,} of {size:,})")
+        if marker in _JPEG_SOF:
+            if length < 8:
+                raise ImageError(path, "unreadable JPEG file (a frame header of "
+                                       f"{length} bytes)")
+            _, h, w, n = struct.unpack(">BHHB", _exact(f, 6))
+            if h == 0:
+                raise ImageError(path, "a JPEG file whose height follows its image data "
+                                       "(DNL marker): not read")
+            _dimensions(path, "JPEG", w, h)
+            return ImageHeader("jpeg", w, h, n, size)
+        f.seek(length - 2, os.SEEK_CUR)
+    raise ImageError(path, f"unreadable JPEG file (no frame header in its first "
+                           f"{JPEG_MAX_SEGMENTS:,} segments)")
+
+
 def _exr(path, size: int) -> ImageHeader:
     """The OpenEXR header(s): read attribute by attribute, skipping the values not needed."""
     try:
@@ -344,7 +404,9 @@ def read_header(path: str | Path) -> ImageHeader:
         fmt = "ppm" if sniff(head) == "ppm" else None
     if fmt is None:
         raise ImageError(path, "not an image (its first bytes are no OpenEXR, PFM, Radiance "
-                               "HDR, PNG or PPM P3/P6 header)")
+                               "HDR, PNG, PPM P3/P6 or JPEG header)")
+    if fmt == "jpeg":
+        return _jpeg(path, size)
     if fmt == "exr":
         return _exr(path, size)
     if fmt == "png":
@@ -360,14 +422,16 @@ def check_image_file(path: str | Path, formats: tuple[str, ...] | None = None,
                      work_bytes_per_value: int | None = None) -> ImageHeader:
     """The header of ``path`` once it is known that the image can be read (module docstring).
 
-    ``formats`` (e.g. ``("png", "exr")``) refuses others; ``work_bytes_per_value``
+    ``formats`` (e.g. ``("png", "exr")``) refuses others (by default
+    :data:`DEFAULT_FORMATS`: all but JPEG); ``work_bytes_per_value``
     overrides the reader's working memory per value in the estimate
     (:func:`tracer.limits.check_image_memory`).
     """
     from whitted.tracer.limits import check_image_memory
 
     header = read_header(path)
-    if formats is not None and header.format not in formats:
+    formats = DEFAULT_FORMATS if formats is None else formats
+    if header.format not in formats:
         names = " or ".join(FORMAT_NAMES[f] for f in formats)
         raise ImageError(path, f"a {header.name} file, expected {names}")
     try:

@@ -293,37 +293,140 @@ def read_exr_channels(path: str | Path) -> tuple[dict[str, np.ndarray], dict]:
 PNG_TEXTURE_WORK_BYTES_PER_VALUE = 44
 
 
+#: A JPEG texture's reading, per value beyond the decoded one: as a PNG's (Pillow's image,
+#: its RGB conversion, then the same float64 codes and sRGB curve).
+JPEG_TEXTURE_WORK_BYTES_PER_VALUE = PNG_TEXTURE_WORK_BYTES_PER_VALUE
+#: A Radiance HDR file's reading, per value beyond the float32 result: the RGBE bytes
+#: (4 a pixel, 3 values) and float32 mantissas and scales.
+HDR_TEXTURE_WORK_BYTES_PER_VALUE = 12
+
+#: Bitmap files by suffix: the format their bytes must hold.
+TEXTURE_SUFFIXES = {".png": "png", ".exr": "exr", ".jpg": "jpeg", ".jpeg": "jpeg",
+                    ".hdr": "hdr"}
+
+
 def read_texture_file(path: str | Path) -> np.ndarray:
-    """A bitmap texture's or environment map's file: an 8-bit PNG as its codes (H x W x 3
-    uint8, grey, palette and alpha reduced to RGB), an OpenEXR file as its linear R, G, B
-    (float32). The format must agree with the suffix (``.png``, ``.exr``); the file is
-    checked before it is decoded (:func:`tracer.imageheader.check_image_file`).
-    Errors are one :class:`~tracer.imageheader.ImageError` line.
+    """A bitmap texture's or environment map's file, as Mitsuba's ``Bitmap`` decodes it:
+    an 8-bit PNG or a JPEG as its codes (H x W x 3 uint8, grey, palette and alpha
+    reduced to RGB; the caller decodes sRGB), an OpenEXR or Radiance HDR file as its
+    linear R, G, B (float32). The format must agree with the suffix (``.png``,
+    ``.jpg``/``.jpeg``, ``.exr``, ``.hdr``); the file is checked before it is decoded
+    (:func:`tracer.imageheader.check_image_file`). Errors are one
+    :class:`~tracer.imageheader.ImageError` line.
     """
     from whitted.tracer.imageheader import ImageError, check_image_file, read_file
 
     suffix = Path(path).suffix.lower()
-    if suffix == ".exr":
+    fmt = TEXTURE_SUFFIXES.get(suffix)
+    if fmt is None:
+        raise ImageError(path, "expected a .png, .jpg, .jpeg, .exr or .hdr image")
+    if fmt == "exr":
         return np.ascontiguousarray(read_exr(path), dtype=np.float32)
-    if suffix != ".png":
-        raise ImageError(path, "expected a .png or .exr image")
+    if fmt == "hdr":
+        header = check_image_file(path, ("hdr",), HDR_TEXTURE_WORK_BYTES_PER_VALUE)
+        return read_rgbe(path, read_file(path, header), header.width, header.height)
+    work = PNG_TEXTURE_WORK_BYTES_PER_VALUE if fmt == "png" else \
+        JPEG_TEXTURE_WORK_BYTES_PER_VALUE
+    data = read_file(path, check_image_file(path, (fmt,), work))
+    return _pillow_codes(path, data, fmt)
+
+
+def _pillow_codes(path, data: bytes, fmt: str) -> np.ndarray:
+    """An 8-bit PNG's or a JPEG's codes through Pillow (H x W x 3 uint8).
+
+    JPEG: Pillow's libjpeg(-turbo) with its defaults (the accurate integer IDCT,
+    fancy chroma upsampling), as Mitsuba's libjpeg decodes; grey and YCbCr only
+    (Mitsuba reads one or three components), no colour management.
+    """
     from PIL import Image
 
-    data = read_file(path, check_image_file(path, ("png",), PNG_TEXTURE_WORK_BYTES_PER_VALUE))
-    # The size was checked against WHITTED_MAX_MEMORY above: Pillow's own limit on
-    # pixels (a warning, then an exception, at 89 and 179 million) would only differ.
+    from whitted.tracer.imageheader import ImageError
+
+    name = "PNG" if fmt == "png" else "JPEG"
+    allowed = ("L", "LA", "RGB", "RGBA", "P") if fmt == "png" else ("L", "RGB")
+    # The size was checked against WHITTED_MAX_MEMORY: Pillow's own limit on pixels
+    # (a warning, then an exception, at 89 and 179 million) would only differ.
     bomb_limit, Image.MAX_IMAGE_PIXELS = Image.MAX_IMAGE_PIXELS, None
     try:
-        with Image.open(io.BytesIO(data), formats=["PNG"]) as im:
-            if im.mode not in ("L", "LA", "RGB", "RGBA", "P"):
-                raise ImageError(path, f"an 8-bit PNG is expected, got mode {im.mode}")
+        with Image.open(io.BytesIO(data), formats=[name]) as im:
+            if im.mode not in allowed:
+                expected = "an 8-bit PNG" if fmt == "png" else "a grey or RGB (YCbCr) JPEG"
+                raise ImageError(path, f"{expected} is expected, got mode {im.mode}")
             return np.asarray(im.convert("RGB"), dtype=np.uint8)
     except (OSError, ValueError, SyntaxError, EOFError) as e:
         from whitted.tracer.errors import one_line
 
-        raise ImageError(path, f"unreadable PNG file ({one_line(str(e), 160)})") from None
+        raise ImageError(path, f"unreadable {name} file ({one_line(str(e), 160)})") from None
     finally:
         Image.MAX_IMAGE_PIXELS = bomb_limit
+
+
+def read_rgbe(path, data: bytes, width: int, height: int) -> np.ndarray:
+    """The pixels of a Radiance HDR file (its bytes ``data``; the size from its checked
+    header) as linear float32 R, G, B, H x W x 3, top row first.
+
+    Greg Ward's RGBE ("Real Pixels", Graphics Gems II, 1991), read as Bruce Walter's
+    ``rgbe.c`` reads it, which Mitsuba's ``Bitmap`` follows: a value is
+    m 2^(E - 136) for a mantissa m and a shared exponent E > 0, and 0 where E = 0
+    (exact in float32). Scanlines 8 to 32767 pixels wide may be run-length encoded
+    per channel (``2 2`` and the width, then runs: a count above 128 repeats one byte
+    count - 128 times, else that many bytes follow); others, and files whose first
+    scanline is not so marked, are flat RGBE quadruples. Only the standard orientation
+    ``-Y height +X width`` and ``FORMAT=32-bit_rle_rgbe`` (or none) are read.
+    """
+    from whitted.tracer.imageheader import ImageError
+
+    def bad(why: str) -> ImageError:
+        return ImageError(path, f"unreadable Radiance HDR file ({why})")
+
+    end = data.find(b"\n\n")
+    for line in data[:end].split(b"\n")[1:]:
+        if line.startswith(b"FORMAT=") and line.strip() != b"FORMAT=32-bit_rle_rgbe":
+            raise bad(f"{line.strip()[:40].decode('ascii', 'replace')}; only "
+                      "32-bit_rle_rgbe is read")
+    nl = data.find(b"\n", end + 2)
+    res = data[end + 2:nl if nl >= 0 else len(data)].split()
+    if res[:1] != [b"-Y"] or res[2:3] != [b"+X"]:
+        raise bad(f"orientation {b' '.join(res[0:4:2]).decode('ascii', 'replace')[:20]}; "
+                  "only -Y height +X width is read")
+    pos = nl + 1
+    n = width * height
+    out = np.empty((height, width, 4), dtype=np.uint8)
+    rle = 8 <= width <= 0x7FFF and len(data) >= pos + 4 and \
+        data[pos:pos + 2] == b"\x02\x02" and not data[pos + 2] & 0x80
+    if not rle:
+        flat = np.frombuffer(data, np.uint8, 4 * n, pos) if len(data) - pos >= 4 * n else None
+        if flat is None:
+            raise bad(f"{width} x {height} pixels, the file ends before them")
+        out[:] = flat.reshape(height, width, 4)
+    else:
+        for y in range(height):
+            head = data[pos:pos + 4]
+            if len(head) < 4 or head[:2] != b"\x02\x02" or (head[2] << 8 | head[3]) != width:
+                raise bad(f"scanline {y}: wrong run-length header")
+            pos += 4
+            for c in range(4):
+                x = 0
+                row = out[y, :, c]
+                while x < width:
+                    if pos >= len(data):
+                        raise bad(f"scanline {y}: the file ends inside it")
+                    count = data[pos]
+                    if count > 128:
+                        count -= 128
+                        if x + count > width or pos + 1 >= len(data):
+                            raise bad(f"scanline {y}: a run beyond its width")
+                        row[x:x + count] = data[pos + 1]
+                        pos += 2
+                    else:
+                        if count == 0 or x + count > width or pos + 1 + count > len(data):
+                            raise bad(f"scanline {y}: a run beyond its width")
+                        row[x:x + count] = np.frombuffer(data, np.uint8, count, pos + 1)
+                        pos += 1 + count
+                    x += count
+    e = out[..., 3].astype(np.int32)
+    scale = np.where(e > 0, np.ldexp(np.float32(1), e - 136), np.float32(0)).astype(np.float32)
+    return out[..., :3].astype(np.float32) * scale[..., None]
 
 
 def write_png(path: str | Path, image: np.ndarray) -> None:

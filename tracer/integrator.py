@@ -39,7 +39,7 @@ area light, or a background that is not a hit term).
 
 Pixel samples sit at the centres of n x n strata, or at random inside them
 with the film's ``jitter``; with the box filter a pixel is the mean of its
-own samples, with the gaussian filter every sample is splatted onto the
+own samples, with the gaussian or tent filter every sample is splatted onto the
 pixels within the filter's radius (:class:`_Splat`).
 
 Work is bounded: the image is rendered in chunks of whole pixels, and a level
@@ -1016,6 +1016,13 @@ def gaussian_weight(d, stddev: float):
     return dr.select(dr.abs(d) < r, w, 0.0)
 
 
+def tent_weight(d, radius: float):
+    """Mitsuba's ``tent`` reconstruction filter at offsets d (pixels), one axis:
+    max(0, 1 - |d| / radius) (Mitsuba 3, ``src/rfilters/tent.cpp``, radius 1 by
+    default). Weights of a pixel are the product of the two axes' weights."""
+    return dr.maximum(1.0 - dr.abs(d) * (1.0 / radius), 0.0)
+
+
 class _Splat:
     """Sums of weighted samples and of weights per pixel, for a filter wider than a pixel.
 
@@ -1032,6 +1039,7 @@ class _Splat:
 
     def __init__(self, film):
         self.W, self.H, self.stddev = film.width, film.height, film.stddev
+        self.filter, self.radius = film.filter, film.radius
         self.reach = int(np.ceil(film.filter_radius))
         #: per pixel: sum w, sum w^2, sum w L (3), sum w L^2 (3)
         self.sums = np.zeros((self.W * self.H, 8))
@@ -1050,6 +1058,8 @@ class _Splat:
         f0, n0 = dr.opaque(I32, first), dr.opaque(I32, count)
 
         def weight(d):
+            if self.filter == "tent":
+                return tent_weight(d, self.radius)
             return gaussian_weight(d, self.stddev)
 
         def body(k, acc):

@@ -475,6 +475,8 @@ class _Importer:
         self._warned: set[str] = set()
         self.material_ids: dict[int, str] = {}   # id(bsdf node) -> material name
         self.groups: dict[str, list] = {}
+        self.emitter_owner: dict[int, str] = {}  # id(area emitter node) -> its shape's place
+        self.loose_area: list[Node] = []         # area emitters declared outside a shape
 
     # -------------------------------------------------------------- helpers
 
@@ -653,6 +655,10 @@ class _Importer:
                 self.outside(c, "a participating medium", None, "")
             else:
                 raise XMLImportError(f"{c.where()}: unexpected element in a scene")
+        for e in self.loose_area:  # Mitsuba loads it and ignores it
+            if id(e) not in self.emitter_owner:
+                self.note("lights", f"the area emitter of line {e.line} belongs to no shape "
+                                    "(Mitsuba ignores it too)")
         if not sensors:
             raise XMLImportError(f"{self.path}: no <sensor>; the scene format needs a camera")
         if "max_depth" not in self.out["film"]:
@@ -762,6 +768,11 @@ class _Importer:
         rtype = rf[0].type if rf else "gaussian"
         if rtype == "box":
             film["filter"] = "box"
+        elif rtype == "tent":
+            film["filter"] = "tent"
+            radius = self.number(self.props(rf[0]).get("radius"), 1.0)
+            if radius != 1.0:
+                film["radius"] = float(radius)
         else:
             if rtype != "gaussian":
                 self.outside(rf[0], f'pixel filter "{_short(rtype)}"', "a gaussian (stddev 0.5)",
@@ -919,8 +930,9 @@ class _Importer:
         """An <emitter> as a [[lights]] table, through the table of Mitsuba plugins (LIGHTS)."""
         p = self.props(node)
         where = f"lights[{len(self.out['lights'])}]"
-        if node.type == "area":
-            raise XMLImportError(f"{node.where()}: an area emitter belongs inside a <shape>")
+        if node.type == "area":  # declared for a shape that takes it by <ref> (run())
+            self.loose_area.append(node)
+            return
         if node.type not in LIGHTS:
             self.outside(node, f'emitter "{_short(node.type)}"', None, where)
         m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
@@ -1042,7 +1054,9 @@ class _Importer:
             shape["to_world"] = steps
         bsdfs = [c for c in node.children if c.tag in ("bsdf",) or
                  (c.tag == "ref" and self.res.deref(c).tag == "bsdf")]
-        emitters = [c for c in node.children if c.tag == "emitter"]
+        # an emitter inside the shape, or one declared with an id and taken by <ref>
+        emitters = [e for e in (self.res.deref(c) for c in node.children
+                                if c.tag in ("emitter", "ref")) if e.tag == "emitter"]
         if bsdfs:
             shape["material"] = self.material(bsdfs[0], where)
         elif not emitters:  # Mitsuba gives a shape without a BSDF a grey diffuse one
@@ -1051,6 +1065,15 @@ class _Importer:
             e = emitters[0]
             if e.type != "area":
                 self.outside(e, f'emitter "{_short(e.type)}" on a shape', None, where)
+            if len(emitters) > 1:
+                raise XMLImportError(f"{emitters[1].where()}: a shape takes one area emitter "
+                                     "(Mitsuba refuses a second)")
+            if id(e) in self.emitter_owner:  # Mitsuba: "An endpoint can be only be attached
+                raise XMLImportError(        # to a single shape"
+                    f"{node.where()}: the area emitter of line {e.line} is already the "
+                    f"emitter of {self.emitter_owner[id(e)]} (Mitsuba attaches an emitter "
+                    "to one shape only)")
+            self.emitter_owner[id(e)] = where
             shape["emitter"] = {"radiance": self.color(self.props(e).get("radiance"), where,
                                                        [1.0] * 3)}
             if not bsdfs:

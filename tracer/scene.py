@@ -79,17 +79,20 @@ class Film:
     max_depth: int = 6
     #: pixel filter: "box" (each sample counts for its own pixel) or "gaussian" (Mitsuba's
     #: ``gaussian`` rfilter: weights exp(-d^2 / 2 stddev^2) - exp(-r^2 / 2 stddev^2) within
-    #: the radius r = 4 stddev, normalised over the weights a pixel receives)
+    #: the radius r = 4 stddev, normalised over the weights a pixel receives) or "tent"
+    #: (Mitsuba's ``tent``: weights 1 - |d| / radius per axis, normalised the same way)
     filter: str = "box"
     stddev: float = 0.5
+    radius: float = 1.0   # the tent's
     #: samples at random inside their strata (Mitsuba's ``stratified`` with ``jitter``)
     #: instead of at the strata centres
     jitter: bool = False
 
     @property
     def filter_radius(self) -> float:
-        """Radius of the pixel filter in pixels: 0.5 for the box, 4 stddev for the gaussian."""
-        return 0.5 if self.filter == "box" else 4 * self.stddev
+        """Radius of the pixel filter in pixels: 0.5 for the box, 4 stddev for the gaussian,
+        ``radius`` for the tent."""
+        return {"box": 0.5, "tent": self.radius}.get(self.filter, 4 * self.stddev)
 
     @property
     def depth(self) -> int:
@@ -424,8 +427,8 @@ LIGHT_TYPES = tuple(_emitters.LIGHTS)
 CAMERA_TYPES = ("perspective", "orthographic")
 #: ``fov_axis`` values (Mitsuba's): which extent of the film ``fov`` spans.
 FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
-#: ``[film] filter`` values: Mitsuba's ``box`` and ``gaussian`` reconstruction filters.
-FILTERS = ("box", "gaussian")
+#: ``[film] filter`` values: Mitsuba's ``box``, ``gaussian`` and ``tent`` reconstruction filters.
+FILTERS = ("box", "gaussian", "tent")
 TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare",
              "groups")
 #: Features a scene may declare tracer-only: Mitsuba has no counterpart (each kind
@@ -588,12 +591,16 @@ def _parse_film(t: Table) -> Film:
         stddev = t.number("stddev", d.stddev, lo=0, lo_open=True, hi=4)
     elif t.has("stddev"):
         t.fail("stddev", 'stddev is for filter = "gaussian"')
+    radius = t.number("radius", d.radius, lo=0, lo_open=True, hi=16) if flt == "tent" else \
+        d.radius
+    if flt != "tent" and t.has("radius"):
+        t.fail("radius", 'radius is for filter = "tent"')
     jitter = t.raw("jitter", d.jitter)
     if not isinstance(jitter, bool):
         t.fail("jitter", f"expected true or false, got {show(jitter)}")
     film = Film(width=t.integer("width", d.width, lo=1), height=t.integer("height", d.height, lo=1),
                 spp=t.integer("spp", d.spp, lo=1), max_depth=max_depth, filter=flt,
-                stddev=stddev, jitter=jitter)
+                stddev=stddev, radius=radius, jitter=jitter)
     t.finish()
     return film
 

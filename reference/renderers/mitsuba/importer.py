@@ -15,9 +15,11 @@ tests and by ``whitted import --verify``). A ``load_dict`` dictionary, such as
 :func:`write_import` is ``whitted import``: nothing is written unless the
 TOML text loads as a scene (parsed back from memory, as ``whitted render``
 would read it) and, with ``verify``, agrees with Mitsuba; the TOML is
-written to a temporary file renamed into place, and meshes converted for a
-failed import are removed again. Mitsuba's own errors (a corrupt
-``serialized`` file, a scene it refuses) become one-line errors (:class:`UserError`).
+written to a temporary file renamed into place, into a folder made for it if
+it does not exist yet (:func:`check_output` accepts such a path), and the
+meshes converted and folders made for a failed import are removed again.
+Mitsuba's own errors (a corrupt ``serialized`` file, a scene it refuses) become
+one-line errors (:class:`UserError`).
 """
 
 from __future__ import annotations
@@ -131,6 +133,47 @@ def import_scene(source: str | Path, output: str | Path | None = None,
     return text, imp
 
 
+def check_output(path: str | Path) -> Path:
+    """``whitted import``'s output, refused before any work: a ``.toml`` name whose
+    folder exists or can be made (the nearest existing folder above it written into
+    as a proof: :func:`tracer.imageio.check_output_folder`); not a folder itself."""
+    from whitted.tracer.imageio import check_output_folder, check_output_path
+
+    p = Path(path)
+    if p.suffix.lower() != ".toml":
+        return check_output_path(p, (".toml",), "file type")  # its one-line refusal
+    if p.is_dir():
+        raise UserError(f"{path}: is a folder, expected a file name")
+    if os.path.lexists(p) and not p.is_file():
+        raise UserError(f"{path}: exists and is not a regular file")
+    check_output_folder(p.parent if str(p.parent) else Path("."))
+    if not os.path.lexists(p):
+        check_output_folder(p)  # the file's own name within the limits
+    return p
+
+
+def _make_folders(folder: Path, created: list) -> None:
+    """Make ``folder`` and the folders above it that are missing, each appended to
+    ``created`` (top first) so that a failed import removes them again."""
+    missing = []
+    q = folder
+    while not q.is_dir():
+        missing.append(q)
+        if q.parent == q:
+            break
+        q = q.parent
+    for d in reversed(missing):
+        try:
+            d.mkdir()
+        except FileExistsError:
+            if not d.is_dir():
+                raise UserError(f"{d}: exists and is not a folder") from None
+            continue
+        except OSError as e:
+            raise UserError(f"{d}: cannot make the folder: {e.strerror or e}") from None
+        created.append(d)
+
+
 def write_import(source: str | Path, output: str | Path, approximate: bool = False,
                  verify: bool = False, **params):
     """``whitted import``: (the scene, the import) of ``source``, written to ``output``.
@@ -139,7 +182,8 @@ def write_import(source: str | Path, output: str | Path, approximate: bool = Fal
     (:func:`check_toml`) and, with ``verify``, Mitsuba's loading of ``source``
     agrees on the camera and film (:func:`disagreements`); the file is renamed into
     place from a temporary one, and on any failure the meshes converted for it are
-    removed, so that nothing is left behind."""
+    removed, so that nothing is left behind. A missing folder of ``output`` is made
+    once everything is checked, and removed again if the writing fails."""
     from whitted.tracer.imageio import _atomic_write
 
     output = Path(output)
@@ -151,6 +195,10 @@ def write_import(source: str | Path, output: str | Path, approximate: bool = Fal
             if problems:
                 raise UserError(f"{one_line(str(source), 300)}: the import disagrees with "
                                 "Mitsuba's own loading: " + "; ".join(problems))
+        folder = output.resolve().parent
+        if not folder.is_dir():  # every check passed: only now is the folder made
+            _make_folders(folder, created)
+            scene = check_toml(text, output)  # the text, read back from where it will lie
         _atomic_write(output, lambda tmp: Path(tmp).write_text(text))
     except BaseException:
         _remove(created)
@@ -310,9 +358,7 @@ def _serialized_converter(folder: Path, stem: str, created: list | None = None):
                 "faces": np.asarray(p["faces"], dtype=np.int64).reshape(-1, 3),
                 "normals": arr("vertex_normals", 3), "uvs": arr("vertex_texcoords", 2)}
         out = folder / "meshes" / f"{stem}_{source.stem}_{index}.obj"
-        if not out.parent.is_dir():
-            out.parent.mkdir(parents=True, exist_ok=True)
-            created.append(out.parent)
+        _make_folders(out.parent, created)
         if not out.exists():
             created.append(out)
         _atomic_write(out, lambda tmp: _write_obj(Path(tmp), node))

@@ -9,7 +9,7 @@ scene                     Mitsuba
 ========================  ===================================================
 perspective camera        ``perspective``, ``fov_axis = "x"``, same clip planes
 orthographic camera       ``orthographic``, ``to_world`` = look_at x scale(w/2)
-film                      ``hdrfilm``, ``box`` or ``gaussian`` filter, rgb float32
+film                      ``hdrfilm``, ``box``, ``gaussian`` or ``tent`` filter, rgb float32
 spp                       ``stratified`` sampler, ``jitter`` as the film's
 camera to_world           ``to_world`` as given (``fov_axis`` and principal
                           point offsets as given)
@@ -112,9 +112,12 @@ def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
 
 
 def rfilter_tree(film) -> dict:
-    """Mitsuba's reconstruction filter of the film: ``box``, or ``gaussian`` with its stddev."""
+    """Mitsuba's reconstruction filter of the film: ``box``, ``gaussian`` with its stddev,
+    or ``tent`` with its radius."""
     if film.filter == "gaussian":
         return {"type": "gaussian", "stddev": ("float", film.stddev)}
+    if film.filter == "tent":
+        return {"type": "tent", "radius": ("float", film.radius)}
     return {"type": "box"}
 
 
