@@ -365,7 +365,8 @@ def test_a_glass_formula_bug_is_placed_in_the_light_seen_through_glass(monkeypat
 def test_suspects_are_ranked_with_the_injected_bug_first(monkeypatch):
     # Three formula bugs switched on by monkeypatching; an image made with each (plus
     # noise of 1 % of the image's mean) must name that bug first, at a strength near 1.
-    from whitted.reference.check.suspects import Suspect, format_suspects, rank_suspects
+    from whitted.reference.check.judge import rank_suspects
+    from whitted.reference.check.suspects import Suspect, format_suspects
     from whitted.tracer import fresnel, lights
 
     scene = _scene("glass_sphere", (48, 36))

@@ -21,7 +21,7 @@ from hypothesis import given, settings
 from jsonschema.exceptions import best_match
 from test_fuzz import BASE, QUICK, damaged_scenes, to_toml
 
-import whitted.tracer.schema as schema_mod
+import whitted.tracer.settings_schema as recording
 from whitted.tracer import emitters, materials
 from whitted.tracer.errors import SceneError
 from whitted.tracer.materials import diffuse, textures
@@ -252,7 +252,7 @@ def test_a_new_kind_and_a_new_key_appear_in_the_schema(monkeypatch):
     """A toy material kind, light kind and texture kind, registered as a kind is (one
     line in a registry), and a key a kind's parser starts to read: each is in the schema
     with its type, default and bounds, accepted and refused as the loader does."""
-    monkeypatch.setattr(schema_mod, "_VOCABULARY", {})
+    monkeypatch.setattr(recording, "_VOCABULARY", {})
     before = scene_schema()
     monkeypatch.setitem(materials.REGISTRY, "toy", SimpleNamespace(parse=_toy_material))
     monkeypatch.setitem(emitters.LIGHTS, "lamp", SimpleNamespace(
@@ -307,7 +307,7 @@ def test_choices_among_many_values_do_not_multiply(monkeypatch):
             t.number("coat_depth", 1.0)
         return diffuse.Diffuse(name)
 
-    monkeypatch.setattr(schema_mod, "_VOCABULARY", {})
+    monkeypatch.setattr(recording, "_VOCABULARY", {})
     monkeypatch.setitem(materials.REGISTRY, "glassy", SimpleNamespace(parse=parse))
     glassy = variant(scene_schema()["properties"]["materials"]["additionalProperties"],
                      "glassy")

@@ -168,19 +168,6 @@ def check_depth(max_depth: int) -> None:
         refuse(MAX_DEPTH, f"max_depth {max_depth:,} is too deep")
 
 
-def primitive_count(scene) -> int:
-    """Primitives the tracer builds tables for: triangles of meshes, shapes, instances' copies."""
-    from whitted.tracer.scene import Instance, Mesh
-
-    def count(shapes) -> int:
-        return sum(len(s.faces) if isinstance(s, Mesh) else 1 for s in shapes
-                   if not isinstance(s, Instance))
-
-    per_group = {g: count(members) for g, members in scene.groups.items()}
-    return count(scene.shapes) + sum(per_group[s.group] for s in scene.shapes
-                                     if isinstance(s, Instance))
-
-
 def check_render(scene, moments: bool = False, mitsuba: bool = False) -> None:
     """Refuse a render of ``scene`` (tracer, or with ``mitsuba`` Mitsuba's) that cannot finish."""
     f = scene.film
@@ -189,7 +176,7 @@ def check_render(scene, moments: bool = False, mitsuba: bool = False) -> None:
     what = f"a {f.width}x{f.height} render at {spp:,} spp"
     check_depth(f.max_depth)
     check_samples(pixels * spp, what)
-    prims = primitive_count(scene)
+    prims = scene.primitive_count()
     if prims > MAX_PRIMITIVES.value():
         refuse(MAX_PRIMITIVES, f"the scene has {prims:,} primitives (instances counted "
                                "once per instance)")

@@ -24,7 +24,7 @@ import os
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -34,6 +34,7 @@ from whitted.scenes import resolve as resolve_scene
 # ``from tracer.scene import Diffuse`` keeps working.
 from whitted.tracer import emitters as _emitters
 from whitted.tracer import materials as _materials
+from whitted.tracer import settings_schema
 from whitted.tracer import transform as tf
 from whitted.tracer.emitters import area as _area
 from whitted.tracer.emitters.area import AreaEmitter as AreaEmitter
@@ -164,6 +165,8 @@ Light = LightModel
 
 @dataclass(frozen=True)
 class Sphere:
+    #: the kind, as Mitsuba's ``Shape::shape_type()`` says it (the scene's ``type``)
+    shape_type: ClassVar[str] = "sphere"
     center: Vec3
     radius: float
     material: str | None
@@ -201,10 +204,12 @@ class _Planar:
 @dataclass(frozen=True)
 class Rectangle(_Planar):
     """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "rectangle"
 
 
 @dataclass(frozen=True)
 class Triangle:
+    shape_type: ClassVar[str] = "triangle"
     vertices: tuple[Vec3, Vec3, Vec3]  # world space, after to_world
     material: str | None
     emitter: AreaEmitter | None = None
@@ -213,11 +218,13 @@ class Triangle:
 @dataclass(frozen=True)
 class Disk(_Planar):
     """Mitsuba's disk: the unit disk in local xy, normal +z, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "disk"
 
 
 @dataclass(frozen=True)
 class Cylinder:
     """Mitsuba's open cylinder from p0 to p1 with a radius, then ``to_world``."""
+    shape_type: ClassVar[str] = "cylinder"
     p0: Vec3
     p1: Vec3
     radius: float
@@ -239,6 +246,7 @@ class Cylinder:
 @dataclass(frozen=True)
 class Paraboloid:
     """z = x^2 / a^2 + y^2 / b^2 for 0 <= z <= height in local space, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "paraboloid"
     a: float
     b: float
     height: float
@@ -250,6 +258,7 @@ class Paraboloid:
 @dataclass(frozen=True)
 class Polygon:
     """A planar polygon (convex or not), vertices in world space after ``to_world``."""
+    shape_type: ClassVar[str] = "polygon"
     vertices: tuple[Vec3, ...]
     material: str | None
     emitter: AreaEmitter | None = None
@@ -258,6 +267,7 @@ class Polygon:
 @dataclass(frozen=True, eq=False)
 class Mesh:
     """A triangle mesh from an OBJ or PLY file, in world space after ``to_world``."""
+    shape_type: ClassVar[str] = "mesh"
     file: str
     smooth: bool
     vertices: np.ndarray       # (V, 3) world space
@@ -272,6 +282,7 @@ class Mesh:
 @dataclass(frozen=True)
 class Instance:
     """A group of shapes placed by ``to_world`` (the group's own shapes are in object space)."""
+    shape_type: ClassVar[str] = "instance"
     group: str
     to_world: Matrix
     material: str | None = None
@@ -281,6 +292,7 @@ class Instance:
 @dataclass(frozen=True, eq=False)
 class Cube(Mesh):
     """Mitsuba's ``cube``: [-1, 1]^3 as 12 flat triangles, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "cube"
 
 
 def cube_mesh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -382,6 +394,17 @@ class Scene:
             if light is not None:
                 out.append(light)
         return tuple(out)
+
+    def primitive_count(self) -> int:
+        """Primitives the tracer builds tables for: triangles of meshes, shapes, instances'
+        copies (:func:`tracer.limits.check_render` bounds it)."""
+        def count(shapes) -> int:
+            return sum(len(s.faces) if isinstance(s, Mesh) else 1 for s in shapes
+                       if not isinstance(s, Instance))
+
+        per_group = {g: count(members) for g, members in self.groups.items()}
+        return count(self.shapes) + sum(per_group[s.group] for s in self.shapes
+                                        if isinstance(s, Instance))
 
     def has_area_lights(self) -> bool:
         return any(s.emitter is not None for s in self.shapes)
@@ -526,7 +549,14 @@ def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
 def parse_scene(data: dict, path: str = "<scene>") -> Scene:
     """Validate an already parsed TOML document (see :func:`load_scene`)."""
     _check_nesting(path, data)
-    return _parse_top(Table(path, "", data))
+    return _parse_top(Table(path, "", data, known=known_keys))
+
+
+def known_keys(pattern: str, kind: str | None = None) -> frozenset[str]:
+    """The keys a table at ``pattern`` (e.g. ``shapes[0]``, ``materials.NAME``) of ``type``
+    ``kind`` may have (any kind's when None or unknown), recorded from the parsers
+    (:mod:`tracer.settings_schema`); for the loader's messages about a missing key."""
+    return settings_schema.known_keys(_parse_top, pattern, kind)
 
 
 def _parse_top(top: Table) -> Scene:

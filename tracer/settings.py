@@ -44,8 +44,12 @@ class Table:
     """A TOML table being read: remembers its key path and which keys were used."""
 
     def __init__(self, path: str, key: str, data: Any, what: str = "a table",
-                 pattern: str | None = None):
+                 pattern: str | None = None, known: Any = None):
         self.path, self.key = path, key
+        #: ``known(pattern, kind)``: the keys a table at ``pattern`` of ``type`` ``kind``
+        #: may have, for messages (the scene's: :func:`tracer.scene.known_keys`); None: no
+        #: such list. Sub-tables inherit it.
+        self.known = known
         #: the key path with NAME for user-chosen names and [0] for indices
         self.pattern = key if pattern is None else pattern
         self.kind: str | None = None  # the ``type`` read, once read
@@ -71,7 +75,7 @@ class Table:
         """The value of ``key`` as TOML gave it (``default`` when absent, ``...``: required).
 
         ``schema`` is the JSON Schema of the values the caller accepts: the
-        helpers below pass their own, and :mod:`tracer.schema` builds the scene
+        helpers below pass their own, and :mod:`tracer.settings_schema` builds the scene
         format's schema from them (this table ignores it).
         """
         self.used.add(key)
@@ -85,9 +89,9 @@ class Table:
     def unknown_first(self, key: str) -> None:
         """Before saying ``key`` is missing: a key this kind of table does not know (a
         misspelling, or a key of another kind) is the likelier fault, and is named first."""
-        from whitted.tracer.schema import known_keys
-
-        known = known_keys(self.pattern, self.kind)
+        if self.known is None:
+            return
+        known = self.known(self.pattern, self.kind)
         unknown = [k for k in self.data if k not in self.used and k not in known]
         if known and unknown:
             self.fail(unknown[0], f"unknown key (expected one of: {', '.join(sorted(known))}); "
@@ -162,7 +166,7 @@ class Table:
     def table(self, key: str, default: Any = ..., parse: Any = None) -> Any:
         """The sub-table ``key``; with ``parse``, what ``parse(sub-table)`` makes of it."""
         v = self.raw(key, default, "a table", {"type": "object"})
-        sub = Table(self.path, self._k(key), v, pattern=self._p(key))
+        sub = Table(self.path, self._k(key), v, pattern=self._p(key), known=self.known)
         return sub if parse is None else parse(sub)
 
     def tables(self, key: str, parse: Any, what: str | None = None,
@@ -173,7 +177,7 @@ class Table:
         if not isinstance(v, list):
             self.fail(key, f"expected {what}, got {show(v)}")
         return [parse(Table(self.path, f"{self._k(key)}[{i}]", x, item_what,
-                             f"{self._p(key)}[0]")) for i, x in enumerate(v)]
+                            f"{self._p(key)}[0]", self.known)) for i, x in enumerate(v)]
 
     def each(self, parse: Any) -> dict:
         """Every key of this table, each a sub-table named by the user: ``parse(sub, name)``."""
@@ -181,7 +185,7 @@ class Table:
         for name in list(self.data):
             self.used.add(name)
             out[name] = parse(Table(self.path, self._k(name), self.data[name],
-                                     pattern=self._p("NAME")), name)
+                                    pattern=self._p("NAME"), known=self.known), name)
         return out
 
     def is_table(self, key: str) -> bool:

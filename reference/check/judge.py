@@ -704,6 +704,39 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
     return run
 
 
+def rank_suspects(user_image: np.ndarray, scene, candidates: list,
+                  reference: np.ndarray | None = None, variance: np.ndarray | None = None,
+                  use: np.ndarray | None = None) -> list:
+    """Rank formula bugs by how well each one's image explains ``user_image``.
+
+    ``reference`` defaults to the tracer's image of the scene, ``variance``
+    (the weights' inverse) to :func:`judge_image`'s noise
+    estimate for the user's image. For each candidate, D = image - reference
+    is fitted by k (M - reference), M the candidate's render; candidates are
+    ranked by the share of D they explain (best first): ``candidates`` are
+    :class:`reference.check.suspects.Suspect`, the result its ``SuspectFit``.
+    Here and not in :mod:`reference.check.suspects`, which the judge imports: it
+    judges the image first.
+    """
+    u = np.asarray(user_image, dtype=np.float64)
+    if reference is None or variance is None:
+        from whitted.reference.check.images import UserImage
+
+        ref = tracer_reference(scene)
+        if reference is None:
+            reference = ref.image
+        else:
+            ref.image = np.asarray(reference, dtype=np.float64)
+        if variance is None:
+            result = judge_image(UserImage("<image>", "array", "float32", u), ref)
+            variance, use = result.arrays["var"], result.arrays["valid"]
+    from whitted.reference.check.suspects import rank_difference
+
+    r = np.asarray(reference, dtype=np.float64)
+    return rank_difference(u - r, variance, use, candidates,
+                           [c.render(scene) for c in candidates], r)
+
+
 def decomposition(scene, result: CheckResult, ids: np.ndarray, names: list[str],
                   seed: int = 0) -> dict:
     """The failing image's difference by light path and by first-hit material."""

@@ -17,7 +17,8 @@ difference is:
   whose camera ray first hits each material (:func:`tracer.integrator.material_ids`),
   the background and the emitters, with its share of the difference beyond
   the noise and its relative bias;
-* by suspect (:func:`rank_suspects`, :func:`rank_catalog`): candidates, each
+* by suspect (:func:`rank_difference`, :func:`rank_catalog`, and for a user's image
+  :func:`reference.check.judge.rank_suspects`): candidates, each
   a formula bug with the reference rendered with that bug; D ~ k (M_c - R)
   for each candidate's image M_c, ranked by the share of D it explains. A
   render made with one of the bugs is explained by that bug with k near 1.
@@ -309,35 +310,6 @@ def _order(fits: list[SuspectFit]) -> list[SuspectFit]:
         out += group
         placed.update(g.id for g in group)
     return out
-
-
-def rank_suspects(user_image: np.ndarray, scene, candidates: list[Suspect],
-                  reference: np.ndarray | None = None, variance: np.ndarray | None = None,
-                  use: np.ndarray | None = None) -> list[SuspectFit]:
-    """Rank formula bugs by how well each one's image explains ``user_image``.
-
-    ``reference`` defaults to the tracer's image of the scene, ``variance``
-    (the weights' inverse) to :func:`reference.check.judge.judge_image`'s noise
-    estimate for the user's image. For each candidate, D = image - reference
-    is fitted by k (M - reference), M the candidate's render; candidates are
-    ranked by the share of D they explain (best first).
-    """
-    u = np.asarray(user_image, dtype=np.float64)
-    if reference is None or variance is None:
-        from whitted.reference.check.images import UserImage
-        from whitted.reference.check.judge import judge_image, tracer_reference
-
-        ref = tracer_reference(scene)
-        if reference is None:
-            reference = ref.image
-        else:
-            ref.image = np.asarray(reference, dtype=np.float64)
-        if variance is None:
-            result = judge_image(UserImage("<image>", "array", "float32", u), ref)
-            variance, use = result.arrays["var"], result.arrays["valid"]
-    r = np.asarray(reference, dtype=np.float64)
-    return rank_difference(u - r, variance, use, candidates,
-                           [c.render(scene) for c in candidates], r)
 
 
 # ------------------------------------------------------- the catalog's bugs as suspects

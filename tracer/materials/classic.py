@@ -105,9 +105,8 @@ class Classic(base.MaterialModel):
         if self.kl <= 0:
             return None
         from whitted.tracer.emitters.heckbert import HeckbertSphere
-        from whitted.tracer.scene import Sphere
 
-        if not isinstance(shape, Sphere):
+        if shape.shape_type != "sphere":
             raise ValueError(f'material "{self.name}" has kl > 0, which makes a light of a '
                              "sphere (lit from its centre), not of a "
                              f"{type(shape).__name__.lower()}")
