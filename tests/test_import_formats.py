@@ -377,6 +377,18 @@ def test_import_makes_the_output_folder(tmp_path):
     assert load_scene(out).shapes
 
 
+def test_import_command_makes_the_output_folder_and_leaves_none_when_refused(tmp_path):
+    from conftest import run_cli
+
+    out = tmp_path / "new_folder" / "cbox.toml"
+    r = run_cli("import", CBOX / "cbox-rgb.xml", "-o", out)
+    assert r.returncode == 0, r.stderr
+    assert out.is_file()
+    r = run_cli("import", CBOX / "cbox-spectral.xml", "-o", tmp_path / "other" / "x.toml")
+    assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
+    assert not (tmp_path / "other").exists()
+
+
 def test_a_failed_import_leaves_no_folder_behind(tmp_path):
     """Refused by the reader, or by the tracer's loading of the TOML: no folder made."""
     from whitted.reference.renderers.mitsuba.importer import write_import

@@ -28,12 +28,11 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from whitted.reference.renderers.mitsuba.importer import write_import
+    from whitted.reference.renderers.mitsuba.importer import check_output, write_import
     from whitted.tracer.errors import UserError
-    from whitted.tracer.imageio import check_output_path
     from whitted.tracer.mitsuba_xml import VALUE_SHOWN
 
-    out = check_output_path(args.output, (".toml",), "file type")
+    out = check_output(args.output)  # its folder is made once the import has been checked
     params = {}
     for item in args.param or []:
         name, sep, value = item.partition("=")
