@@ -24,7 +24,7 @@ INTRO = """\
 
 Every command has `--help`, which prints its options as the tables below list them.
 This page is generated from the parser by `python docs/make_commands.py > docs/commands.md`; edit
-that script (or the options' help in `reference/cli.py`), not this page.
+that script (or the options' help, each command's in `reference/commands/<name>.py`), not this page.
 
 `SCENE` is a `.toml` file, the name of a built-in scene (`whitted scenes` lists them),
 or a Mitsuba 3 `.xml` scene (read without Mitsuba; see
