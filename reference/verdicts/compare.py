@@ -278,6 +278,10 @@ class Noise:
     tracer_var: np.ndarray | None = None
     tracer_pass_var: np.ndarray | None = None
     regions: dict[str, np.ndarray] | None = None
+    #: independent replicates behind each side's mean: the reference's passes and the
+    #: tracer's seeds (None: unknown, the normal limit; rule 1's degrees of freedom)
+    ref_passes: int | None = None
+    tracer_seeds: int | None = None
 
     def scaled(self, k: float) -> Noise:
         """The same noise with every variance multiplied by k (a power check's foil)."""
@@ -285,7 +289,8 @@ class Noise:
             return None if a is None else a * k
         return Noise(self.ref_var * k, self.samples, mul(self.ref_pass_var),
                      self.random_fraction, mul(self.tracer_var), mul(self.tracer_pass_var),
-                     self.regions)
+                     self.regions, getattr(self, "ref_passes", None),
+                     getattr(self, "tracer_seeds", None))
 
 
 @dataclass
@@ -321,15 +326,92 @@ def zero_variance_bound(ref: np.ndarray, random_fraction: np.ndarray, samples: i
     return q[..., None] * b
 
 
+def _betainc(a: np.ndarray, b: float, x: np.ndarray) -> np.ndarray:
+    """Regularised incomplete beta I_x(a, b), elementwise (Lentz's continued fraction,
+    Numerical Recipes 6.4), for :func:`student_t_tail`."""
+    a = np.asarray(a, dtype=np.float64)
+    x = np.clip(np.asarray(x, dtype=np.float64), 0.0, 1.0)
+    lbeta = (np.vectorize(math.lgamma)(a) + math.lgamma(b) - np.vectorize(math.lgamma)(a + b))
+    with np.errstate(divide="ignore", invalid="ignore", over="ignore"):
+        front = np.exp(a * np.log(np.maximum(x, 1e-300)) + b * np.log1p(-np.minimum(x, 1 - 1e-16))
+                       - lbeta) / a
+        tiny = 1e-300
+        f = np.ones_like(x)
+        c = np.ones_like(x)
+        d = 1.0 - (a + b) * x / (a + 1.0)
+        d = 1.0 / np.where(np.abs(d) < tiny, tiny, d)
+        f = d.copy()
+        for m in range(1, 300):
+            for num in (m * (b - m) * x / ((a + 2 * m - 1) * (a + 2 * m)),
+                        -(a + m) * (a + b + m) * x / ((a + 2 * m) * (a + 2 * m + 1))):
+                d = 1.0 + num * d
+                d = 1.0 / np.where(np.abs(d) < tiny, tiny, d)
+                c = 1.0 + num / np.where(np.abs(c) < tiny, tiny, c)
+                f = f * c * d
+            if np.all(np.abs(c * d - 1.0) < 1e-12):
+                break
+        return np.where(x <= 0, 0.0, np.where(x >= 1, 1.0, front * f))
+
+
+def student_t_tail(z: np.ndarray, dof) -> np.ndarray:
+    """Two-sided tail P(|T| >= z) of Student's t with ``dof`` degrees of freedom
+    (elementwise; an infinite dof is the normal's erfc(z / sqrt 2))."""
+    z = np.abs(np.asarray(z, dtype=np.float64))
+    dof = np.broadcast_to(np.asarray(dof, dtype=np.float64), z.shape)
+    normal = np.vectorize(math.erfc, otypes=[np.float64])(z / math.sqrt(2))
+    finite = np.isfinite(dof)
+    if not finite.any():
+        return normal
+    nu = np.where(finite, dof, 1.0)
+    # P(|T| >= z) = I_{nu / (nu + z^2)}(nu / 2, 1 / 2); the continued fraction converges
+    # fast for x < (a + 1) / (a + b + 2), else use the symmetry I_x(a, b) = 1 - I_{1-x}(b, a)
+    x = nu / (nu + z * z)
+    return np.where(finite, _betainc(nu / 2, 0.5, x), normal)
+
+
+def student_t_quantile(p: float, dof: float) -> float:
+    """z with P(|T| >= z) = p for Student's t with ``dof`` degrees of freedom (bisection)."""
+    if not math.isfinite(dof):
+        return NormalDist().inv_cdf(1 - p / 2)
+    lo, hi = 0.0, 1e4
+    for _ in range(200):
+        mid = (lo + hi) / 2
+        lo, hi = (mid, hi) if float(student_t_tail(np.array([mid]), dof)[0]) > p else (lo, mid)
+    return hi
+
+
+def welch_dof(ref_var: np.ndarray, ref_replicates: int | None, test_var, test_replicates):
+    """Rule 1's degrees of freedom per pixel-channel (Welch-Satterthwaite).
+
+    Each side's variance of its mean is known only as well as its independent
+    replicates allow (the reference's passes, the tracer's seeds: the samples of
+    one pass sit at the same strata, so it is the passes that are independent),
+    nu_side = replicates - 1; the sum of the two variances then has
+    nu = (V_r + V_t)^2 / (V_r^2 / nu_r + V_t^2 / nu_t). Infinite (the normal limit)
+    where a side's replicates are unknown and that side's variance dominates.
+    """
+    vr = np.asarray(ref_var, dtype=np.float64)
+    vt = np.zeros_like(vr) if test_var is None else np.asarray(test_var, dtype=np.float64)
+    nu_r = math.inf if not ref_replicates or ref_replicates < 2 else ref_replicates - 1
+    nu_t = math.inf if not test_replicates or test_replicates < 2 else test_replicates - 1
+    den = vr ** 2 / nu_r + vt ** 2 / nu_t
+    with np.errstate(divide="ignore", invalid="ignore"):
+        return np.where(den > 0, (vr + vt) ** 2 / np.where(den > 0, den, 1.0), np.inf)
+
+
 def z_test(test: np.ndarray, ref: np.ndarray, ref_var: np.ndarray,
            test_var: np.ndarray | None = None, alpha: float = ZTEST_ALPHA,
            pass_fraction: float = ZTEST_PASS_FRACTION,
-           random_fraction: np.ndarray | None = None, samples: int | None = None) -> ZTest:
-    """Per-pixel, per-channel two-sided z-test with the Sidak correction (rules 1 and 2).
+           random_fraction: np.ndarray | None = None, samples: int | None = None,
+           ref_replicates: int | None = None, test_replicates: int | None = None) -> ZTest:
+    """Per-pixel, per-channel two-sided test with the Sidak correction (rules 1 and 2).
 
     With ``random_fraction`` and ``samples`` (the reference's samples per pixel),
     pixel-channels where the reference made random choices but estimated zero
-    variance are judged by the zero-variance rule instead.
+    variance are judged by the zero-variance rule instead. With
+    ``ref_replicates`` / ``test_replicates`` (passes, seeds) the statistic is
+    referred to Student's t with Welch's degrees of freedom (:func:`welch_dof`)
+    instead of the normal: the t-like correction of rule 1.
     """
     t = test.astype(np.float64)
     r = ref.astype(np.float64)
@@ -337,7 +419,11 @@ def z_test(test: np.ndarray, ref: np.ndarray, ref_var: np.ndarray,
     tvar = 0 if test_var is None else test_var.astype(np.float64)
     var = np.maximum(ref_var.astype(np.float64) + tvar + floor, 1e-300)
     z = np.abs(t - r) / np.sqrt(var)
-    p = np.vectorize(math.erfc, otypes=[np.float64])(z / math.sqrt(2))
+    if ref_replicates or test_replicates:
+        dof = welch_dof(ref_var, ref_replicates, test_var, test_replicates)
+        p = student_t_tail(z, dof)
+    else:
+        p = np.vectorize(math.erfc, otypes=[np.float64])(z / math.sqrt(2))
     pixels = test.shape[0] * test.shape[1]
     alpha_pixel = sidak(alpha, pixels)
     zero = zero_ok = 0
@@ -345,7 +431,8 @@ def z_test(test: np.ndarray, ref: np.ndarray, ref_var: np.ndarray,
         bound = zero_variance_bound(r, random_fraction, samples, alpha_pixel)
         rule = np.isfinite(bound) & (bound > 0) & \
             (ref_var.astype(np.float64) <= (FLOAT_SIGMA * np.abs(r)) ** 2)
-        z_crit = NormalDist().inv_cdf(1 - alpha_pixel / 2)
+        nu_t = (test_replicates - 1 if test_replicates and test_replicates > 1 else math.inf)
+        z_crit = student_t_quantile(alpha_pixel, nu_t)
         ok = np.abs(t - r) <= bound + z_crit * np.sqrt(tvar + floor)
         p = np.where(rule, np.where(ok, 1.0, 0.0), p)
         zero, zero_ok = int(rule.sum()), int((rule & ok).sum())
@@ -381,12 +468,24 @@ def block_metrics(test: np.ndarray, ref: np.ndarray, var: np.ndarray | None = No
     bt, br = block_mean(test), block_mean(ref)
     rel = pixel_relative_difference(bt, br)
     beyond = rel > 0.05
+    median_rel = rel
     if var is not None:
         v = _channel_sum_variance(var)[..., None]
         sigma_block = np.sqrt(block_mean(v)[..., 0] / block_pixels(v))  # Var of a mean
         diff = np.abs(bt.astype(np.float64) - br).sum(-1)
         beyond &= diff > BLOCK_SIGMAS * sigma_block
-    return {"block_median_rel": float(np.median(rel)),
+        # The median judges the relative difference beyond BLOCK_SIGMAS of the block's
+        # noise (issue 28): at 16 spp a 1024-sample reference and a 256-sample tracer
+        # carry a few per cent of relative noise in dim blocks, and the median of the
+        # plain relative difference then measured the noise (2.2 to 2.5 % on an area-lit
+        # plastic scene, a correct tracer). Under a correct tracer a block exceeds 3
+        # sigma with probability 0.27 % (normal: a block pools 16 pixels x >= 256
+        # samples), so the median, which needs half the blocks, is 0 but with
+        # probability below 1e-100; a relative bias b over more than half the blocks
+        # still fails it once b > 1 % + 3 sigma_block / |r_block|.
+        excess = np.maximum(diff - BLOCK_SIGMAS * sigma_block, 0.0)
+        median_rel = np.where(diff > 0, rel * excess / np.where(diff > 0, diff, 1.0), 0.0)
+    return {"block_median_rel": float(np.median(median_rel)),
             "block_frac_over_5pct": float(beyond.mean())}
 
 
@@ -466,6 +565,63 @@ def region_test(test: np.ndarray, ref: np.ndarray, noise: Noise,
     return RegionTest(alpha_region, z_crit, worst, worst < z_crit, tested)
 
 
+#: Smallest 3 x 3 contrast, relative to the pixel, that counts as an edge (exact_checks).
+EDGE_CONTRAST = 0.1
+
+
+def local_range(ref: np.ndarray) -> np.ndarray:
+    """H x W: sum over channels of (max - min) of ``ref`` over each pixel's 3 x 3
+    neighbourhood (clipped at the image's border)."""
+    r = ref.astype(np.float64)
+    p = np.pad(r, ((1, 1), (1, 1), (0, 0)), mode="edge")
+    h, w = r.shape[:2]
+    win = np.stack([p[i:i + h, j:j + w] for i in range(3) for j in range(3)])
+    return (win.max(axis=0) - win.min(axis=0)).sum(-1)
+
+
+def exact_checks(test: np.ndarray, ref: np.ndarray) -> dict:
+    """exact-strata's pixel and mean checks with edge ties counted apart (issue 28).
+
+    * ``frac_over_01pct``: pixels beyond 1e-3 that are not edge ties. A pixel is an
+      edge tie when its difference, summed over the channels, is at most the
+      reference's range over its 3 x 3 neighbourhood, R_p: where a straight edge
+      (two surfaces meeting, a silhouette, a shadow boundary) passes exactly through
+      sample positions, each side may put those samples on either surface, both
+      valid to float rounding. A flipped sample changes the pixel by (L_A - L_B) /
+      spp, the two surfaces' radiances are what the pixels on either side of the
+      edge show, so |L_A - L_B| <~ R_p, and a straight line meets at most n of the n
+      x n strata: |t - r| <= n R_p / spp = R_p / n <= R_p. Ties are capped by the
+      edges' length: a straight line crosses at most W + H - 1 pixels, so more than
+      ``W + H - 1`` tie pixels (one edge across the whole image, or the two floor-wall
+      edges of a Cornell box, about 35 pixels at 128 x 128) count as differences again.
+    * ``mean_rel_diff``: the image means over the pixels within 1e-3 (those beyond
+      are rule 2's, which allows 0.1 % of them with any difference: two such pixels of
+      a 48 x 48 image moved the whole mean by 2e-4), relative to the reference's mean
+      over all pixels: |sum_in (t - r)| / sum r. What the check is for, a bias between
+      1e-5 and 1e-3 over many pixels, lies within 1e-3 and so stays in the sum.
+    """
+    rel = pixel_relative_difference(test, ref)
+    beyond = rel > 1e-3
+    d = np.abs(test.astype(np.float64) - ref).sum(-1)
+    rng_ = local_range(ref)
+    level = np.abs(ref.astype(np.float64)).sum(-1)
+    # an edge is a discontinuity: 3 x 3 contrast >= EDGE_CONTRAST of the pixel's value
+    # (smooth shading changes far less over 3 pixels), and a tie moves the pixel by at
+    # most that contrast
+    tie = beyond & (rng_ >= EDGE_CONTRAST * level) & (d <= rng_)
+    h, w = rel.shape
+    cap = w + h - 1
+    n_tie = int(tie.sum())
+    counted = beyond & ~tie if n_tie <= cap else beyond
+    inside = ~beyond
+    diff = (test.astype(np.float64) - ref)[inside].sum()
+    total = float(np.abs(ref.astype(np.float64)).sum())
+    mean = abs(float(diff)) / total if total > 0 else (0.0 if diff == 0 else math.inf)
+    return {"frac_over_01pct": float(counted.mean()), "edge_ties": n_tie,
+            "edge_tie_cap": cap, "mean_rel_diff": mean,
+            "pixels_left_out": int(beyond.sum())}
+
+
 @dataclass
 class Verdict:
     test: str                       # "exact-strata", "tessellated" or "z-test"
@@ -494,10 +650,19 @@ def judge(test_name: str, metrics: Metrics, tracer_img, ref_img,
         checks[name] = {"value": value, "limit": limit, "pass": bool(value < limit)}
 
     z = None
-    if test_name in ("exact-strata", "tessellated"):
-        limits = EXACT_LIMITS if test_name == "exact-strata" else TESSELLATED_LIMITS
-        for k, limit in limits.items():
+    if test_name == "exact-strata":
+        e = exact_checks(tracer_img, ref_img)
+        check("median_rel", metrics.median_rel, EXACT_LIMITS["median_rel"])
+        check("frac_over_01pct", e["frac_over_01pct"], EXACT_LIMITS["frac_over_01pct"])
+        checks["frac_over_01pct"].update(edge_ties=e["edge_ties"], edge_tie_cap=e["edge_tie_cap"],
+                                         all_beyond=metrics.frac_over_01pct)
+        check("mean_rel_diff", e["mean_rel_diff"], EXACT_LIMITS["mean_rel_diff"])
+        checks["mean_rel_diff"].update(all_pixels=metrics.mean_rel_diff,
+                                       pixels_left_out=e["pixels_left_out"])
+    if test_name == "tessellated":
+        for k, limit in TESSELLATED_LIMITS.items():
             check(k, getattr(metrics, k), limit)
+    if test_name in ("exact-strata", "tessellated"):
         reason = ("same ray tree at the same strata on both sides, nothing random: float32 "
                   "agreement except samples on edges")
         if test_name == "tessellated":
@@ -507,7 +672,9 @@ def judge(test_name: str, metrics: Metrics, tracer_img, ref_img,
         if noise is None:
             raise ValueError("the z-test needs the reference's variance")
         z = z_test(tracer_img, ref_img, noise.ref_var, noise.tracer_var,
-                   random_fraction=noise.random_fraction, samples=noise.samples)
+                   random_fraction=noise.random_fraction, samples=noise.samples,
+                   ref_replicates=getattr(noise, "ref_passes", None),
+                   test_replicates=getattr(noise, "tracer_seeds", None))
         checks["z_fraction_passed"] = {"value": z.fraction_passed, "limit": ZTEST_PASS_FRACTION,
                                        "pass": z.passed, "alpha_pixel": z.alpha_pixel,
                                        "zero_variance": z.zero_variance,
@@ -807,7 +974,8 @@ def statistical_verdict(scene, ref, tracer_image: np.ndarray | None = None,
     if regions is None:
         regions = regions_of(material_ids(scene), list(scene.materials))
     noise = Noise(ref.variance, spp * ref.passes, ref.pass_variance, ref.random_fraction,
-                  tracer_var, tracer_pass_var, regions)
+                  tracer_var, tracer_pass_var, regions, ref.passes,
+                  seeds if scene.samples_lights() else None)
     metrics = image_metrics(tracer_image, ref.image, with_flip=with_flip)
     verdict, _ = judge("z-test", metrics, tracer_image, ref.image, noise)
     if seeds > 1:
