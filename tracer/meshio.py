@@ -16,7 +16,9 @@ make of it (the tests compare the two):
   plyfile is GPL-licensed; the README says which case each gets wrong.
   Triangle and quad meshes are read in one piece; mixed polygons record by
   record for their list lengths, then in one piece.
-* OBJ files are parsed here: the OBJ readers on PyPI that were measured
+* OBJ files are parsed here, the whole file at once (NumPy's C parser reads the
+  numbers of each statement's lines; a file it cannot vouch for is read line by
+  line, which names a problem's line): the OBJ readers on PyPI that were measured
   (tinyobjloader, trimesh, pywavefront, openmesh, meshio, libigl) each differ
   from Mitsuba's reading or refuse less than it does (negative indices taken
   from the end of the file, quads split another way, bad numbers read as 0,
@@ -69,6 +71,7 @@ import re
 import stat
 import struct
 import sys
+import warnings
 from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
@@ -406,7 +409,278 @@ def _fan(polygons: list[list[int]] | np.ndarray, counts: np.ndarray) -> np.ndarr
 
 
 def _read_obj(path: Path, data: bytes, flip: bool) -> MeshData:
-    """Parse an OBJ file: ``v``, ``vt``, ``vn`` and ``f`` lines; other statements are ignored."""
+    """Parse an OBJ file: ``v``, ``vt``, ``vn`` and ``f`` lines; other statements are ignored.
+
+    The whole file is read at once (:func:`_read_obj_fast`); a file that reading
+    cannot vouch for (a problem, or a layout it does not handle) is read line by
+    line (:func:`_read_obj_lines`), which gives the same arrays or names the problem.
+    """
+    mesh = _read_obj_fast(data, flip)
+    return mesh if mesh is not None else _read_obj_lines(path, data, flip)
+
+
+#: Bytes that end a line for str.splitlines() but not for bytes (VT, FF, FS, GS, RS; NEL,
+#: LS and PS in UTF-8), and US, which str.split() splits at and bytes.split() does not.
+_OBJ_ODD = (b"\x0b", b"\x0c", b"\x1c", b"\x1d", b"\x1e", b"\x1f")
+_OBJ_ODD_UTF8 = (b"\xc2\x85", b"\xe2\x80\xa8", b"\xe2\x80\xa9")
+_OBJ_SPACES = re.compile(rb" {2,}")
+#: A sign not at the start of an index, or not followed by a digit: int() refuses it,
+#: NumPy's integer parser would not.
+_OBJ_BAD_SIGN = re.compile(rb"(?<![ /])[+-]|[+-](?![0-9])")
+_OBJ_TO_SPACE = {kind: bytes.maketrans(chars, b" " * len(chars))
+                 for kind, chars in ((b"v", b"v"), (b"vt", b"vt"), (b"vn", b"vn"),
+                                     (b"f", b"f/"))}
+
+
+def _parse_numbers(text: bytes, dtype) -> np.ndarray | None:
+    """The numbers of a whitespace-separated text (C-parsed by NumPy: a float as float()
+    reads it, correctly rounded), or None if a token is not one number."""
+    if not text.strip():
+        return None  # NumPy reads an empty text as one number
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # a token it cannot read ends the parse with a warning
+        try:
+            return np.fromstring(text, dtype=dtype, sep=" ")
+        except (ValueError, DeprecationWarning):
+            return None
+
+
+def _single_spaced(chunk: bytes) -> bytes:
+    """The lines with single spaces between tokens and none at their ends."""
+    return _OBJ_SPACES.sub(b" ", chunk).replace(b" \n", b"\n")
+
+
+def _obj_numbers(chunk: bytes, kind: bytes, n: int) -> np.ndarray | None:
+    """(n, k) values of the n ``v``, ``vt`` or ``vn`` lines ``chunk`` (each ending in a
+    newline) if each holds k numbers that float() reads; None otherwise.
+
+    The skeleton of the lines (their text once the characters of numbers are
+    deleted) must be the keyword and k spaces a line: every other character
+    (a letter of 'nan', an underscore, a second keyword) stays in it. A line
+    then holds at most k numbers (NumPy's parser needs a space between two),
+    so n k numbers in all means k on every line.
+    """
+    return _respaced(_obj_numbers_spaced, chunk, kind, n)
+
+
+def _respaced(read, chunk: bytes, *args):
+    """``read(chunk, *args)``, or, where that is None, the same of the lines single-spaced."""
+    out = read(chunk, *args)
+    if out is None and (b"  " in chunk or b" \n" in chunk):
+        out = read(_single_spaced(chunk), *args)
+    return out
+
+
+def _obj_numbers_spaced(chunk: bytes, kind: bytes, n: int) -> np.ndarray | None:
+    skel = chunk.translate(None, b"0123456789.eE+-")
+    k = skel.index(b"\n") - len(kind)
+    if k <= 0 or skel != (kind + b" " * k + b"\n") * n:
+        return None
+    values = _parse_numbers(chunk.translate(_OBJ_TO_SPACE[kind]), np.float64)
+    return None if values is None or len(values) != n * k else values.reshape(n, k)
+
+
+def _obj_corners(chunk: bytes, n: int
+                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None] | None:
+    """(corners of each line, then the position, uv and normal indices as written, None
+    where the form has none) of the n ``f`` lines ``chunk`` if their corners all have
+    one form (v, v/vt, v//vn or v/vt/vn) with no field empty but v//vn's middle one, and
+    every index is an integer int() reads; None otherwise.
+
+    The skeleton (digits and signs deleted) is 'f', then ' ', ' /' or ' //' a
+    corner; a corner holds at most as many numbers as it has fields, so the
+    count of numbers read says that none is empty.
+    """
+    return _respaced(_obj_corners_spaced, chunk, n)
+
+
+def _obj_corners_spaced(chunk: bytes, n: int):
+    skel = chunk.translate(None, b"0123456789+-")
+    first = skel[:skel.index(b"\n")].split(b" ")
+    form = first[1] if len(first) > 1 else None
+    corners = skel.count(b" ")
+    ok = form in (b"", b"/", b"//") and (
+        b"/" not in skel if form == b"" else
+        skel.count(b" " + form) == corners and skel.count(b"/") == len(form) * corners)
+    if ok:
+        bare = skel.translate(None, b"/") if form else skel
+        if bare == b"f   \n" * n:
+            counts = np.full(n, 3, dtype=np.int64)
+        elif bare.translate(None, b"f \n") or bare.count(b"f") != n:
+            ok = False
+        else:
+            counts = np.diff(np.flatnonzero(np.frombuffer(bare, dtype=np.uint8) == 10),
+                             prepend=-1) - 2
+            ok = counts.min() >= 3
+    if not ok:
+        return None
+    if (b"-" in chunk or b"+" in chunk) and _OBJ_BAD_SIGN.search(chunk):
+        return None
+    values = _parse_numbers(chunk.translate(_OBJ_TO_SPACE[b"f"]), np.int64)
+    if values is None:
+        return None
+    fields = (True, form != b"", form == b"//")
+    if len(values) == 2 * corners and form == b"//" and chunk.count(b"//") == corners:
+        fields = (True, False, True)  # v//vn on every corner
+    elif len(values) != sum(fields) * corners:
+        return None
+    cols = iter(values.reshape(corners, sum(fields)).T)
+    return counts, next(cols), *(next(cols) if has else None for has in fields[1:])
+
+
+def _read_obj_fast(data: bytes, flip: bool) -> MeshData | None:
+    """The mesh of an OBJ file read whole, or None where :func:`_read_obj_lines` must read it.
+
+    The lines are classified by their first bytes; each statement's lines
+    (``v``, ``vt``, ``vn``, ``f``) are joined into one text, whose skeleton
+    (the text once the characters of numbers are deleted) shows in a
+    comparison or two whether every line holds the same count of well-formed
+    tokens; NumPy's C parser then reads the numbers (as float() and int() read
+    them, the tokens being plain decimals). Anything else (a line indented, a
+    number Python would refuse, a vertex of another form, an index out of
+    range, a value float32 cannot hold) gives None, and the line-by-line reader
+    reads the file or names its problem: the arrays are the same either way.
+    """
+    if any(b in data for b in _OBJ_ODD) or (not data.isascii() and
+                                            any(b in data for b in _OBJ_ODD_UTF8)):
+        return None
+    if b"\r" in data:
+        data = data.replace(b"\r\n", b"\n").replace(b"\r", b"\n")
+    if b"#" in data:  # a comment runs to the end of its line
+        head, *rest = data.split(b"#")
+        data = b"".join([head] + [r[r.find(b"\n"):] if b"\n" in r else b"" for r in rest])
+    if b"\t" in data:
+        data = data.replace(b"\t", b" ")
+    if not data.endswith(b"\n"):
+        data += b"\n"
+    c = np.frombuffer(data + b"\0\0", dtype=np.uint8)
+    ends = np.flatnonzero(c == 10)  # the newline of each line
+    starts = np.concatenate(([0], ends[:-1] + 1))
+    c0, c1, c2 = c[starts], c[starts + 1], c[starts + 2]
+    sep1, sep2 = (c1 == 32) | (c1 == 10), (c2 == 32) | (c2 == 10)
+    kind = np.zeros(len(starts), dtype=np.int8)  # 1 v, 2 vt, 3 vn, 4 f, 0 anything else
+    is_v = c0 == ord("v")
+    kind[is_v & sep1] = 1
+    kind[is_v & (c1 == ord("t")) & sep2] = 2
+    kind[is_v & (c1 == ord("n")) & sep2] = 3
+    kind[(c0 == ord("f")) & sep1] = 4
+    # Indented lines, and lines with non-ASCII bytes (which str.split() may split at):
+    # looked at one by one; a statement among them is left to the line-by-line reader.
+    odd = np.flatnonzero(c0 == 32)
+    if not data.isascii():
+        odd = np.union1d(odd, np.searchsorted(ends, np.flatnonzero(c[:len(data)] >= 128)))
+    for i in odd.tolist():
+        words = data[starts[i]:ends[i]].decode("utf-8", errors="replace").split()
+        if words and words[0] in ("v", "vt", "vn", "f"):
+            return None
+
+    def text_of(k: int, lines: np.ndarray) -> bytes:
+        """The lines of statement k, joined (runs of adjacent lines sliced whole)."""
+        breaks = np.flatnonzero(np.diff(lines) != 1)
+        if len(breaks) < 256:
+            firsts = np.concatenate(([lines[0]], lines[breaks + 1])).tolist()
+            lasts = np.concatenate((lines[breaks], [lines[-1]])).tolist()
+            return b"".join(data[starts[a]:ends[b] + 1] for a, b in zip(firsts, lasts, strict=True))
+        return c[:len(data)][np.repeat(kind == k, ends - starts + 1)].tobytes()
+
+    tables = []
+    for k, word, least in ((1, b"v", 3), (2, b"vt", 1), (3, b"vn", 3)):
+        lines = np.flatnonzero(kind == k)
+        if len(lines) == 0:
+            tables.append(np.zeros((0, 2 if k == 2 else 3)))
+            continue
+        a = _obj_numbers(text_of(k, lines), word, len(lines))
+        if a is None or a.shape[1] < least:
+            return None
+        if k == 2:  # 'vt u' is (u, 0), as Python's reader pads it
+            a = a[:, :2] if a.shape[1] >= 2 else np.concatenate([a, np.zeros_like(a)], 1)
+        else:
+            a = a[:, :3]
+        if not np.isfinite(a).all():
+            return None
+        tables.append(np.ascontiguousarray(a))
+    p, t, n = tables
+    faces = np.flatnonzero(kind == 4)
+    if len(faces) == 0:
+        return None
+    read = _obj_corners(text_of(4, faces), len(faces))
+    if read is None:
+        return None
+    counts, *written = read
+
+    def resolve(k: np.ndarray | None, statement: int) -> np.ndarray | None:
+        """0-based indices (-1 absent) of written ones, counted among the statements
+        read before each face's line; None if one names no such element."""
+        if k is None:
+            return np.full(len(written[0]), -1, dtype=np.int64)
+        before = np.cumsum(kind == statement)[faces]
+        if before[0] != before[-1]:
+            before = np.repeat(before, counts)
+        else:
+            before = before[0]
+        i = np.where(k > 0, k - 1, before + k)
+        if ((k == 0) | (i < 0) | (i >= before)).any():
+            return None
+        return i
+
+    cv, ct, cn = (resolve(k, s) for k, s in zip(written, (1, 2, 3), strict=True))
+    if cv is None or ct is None or cn is None:
+        return None
+    first, corner_vertex = _first_uses(cv, ct, cn, len(p), len(t), len(n))
+    uniq = np.stack([cv[first], ct[first], cn[first]], axis=1)
+    if _first_bad(p[uniq[:, 0]]) is not None:
+        return None
+    vertices = p[uniq[:, 0]]
+    uvs = normals = None
+    if len(t) and (uniq[:, 1] >= 0).any():
+        if _first_bad(t[uniq[uniq[:, 1] >= 0, 1]]) is not None:
+            return None
+        if flip:
+            t[:, 1] = 1.0 - t[:, 1]
+        uvs = np.where((uniq[:, 1] >= 0)[:, None], t[np.maximum(uniq[:, 1], 0)], 0.0)
+    if len(n) and (uniq[:, 2] >= 0).all():
+        if _first_bad(n[uniq[:, 2]], normal=True) is not None:
+            return None
+        normals = _normalized(n[uniq[:, 2]])
+    return MeshData(vertices, _fan(corner_vertex, counts), normals, uvs)
+
+
+def _first_uses(cv: np.ndarray, ct: np.ndarray, cn: np.ndarray, nv: int, nt: int, nn: int
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """(the corner of each distinct (position, uv, normal) triple's first use, in order of
+    first use; each corner's vertex: the rank of its triple), Mitsuba's vertex map."""
+    corners = len(cv)
+    # A position always used with the same uv and normal: its triples are its positions.
+    same = True
+    for other in (ct, cn):
+        seen = np.empty(nv, dtype=np.int64)
+        seen[cv] = other
+        same = same and bool((seen[cv] == other).all())
+    size = nv if same else nv * (nt + 1) * (nn + 1)
+    if size >= 1 << 62:  # the triple as one integer would overflow: the rows themselves
+        key = np.stack([cv, ct, cn], axis=1)
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    else:
+        key = cv if same else (cv * (nt + 1) + (ct + 1)) * (nn + 1) + (cn + 1)
+    if size <= max(4 * corners, 1 << 20):
+        first_of = np.full(size, corners, dtype=np.int64)
+        np.minimum.at(first_of, key, np.arange(corners))
+        used = np.flatnonzero(first_of < corners)
+        first = np.sort(first_of[used])
+        rank = np.empty(size, dtype=np.int64)
+        rank[key[first]] = np.arange(len(first))
+        return first, rank[key]
+    if size < 1 << 62:
+        _, first, inverse = np.unique(key, return_index=True, return_inverse=True)
+    order = np.argsort(first, kind="stable")
+    rank = np.empty_like(order)
+    rank[order] = np.arange(len(order))
+    return first[order], rank[inverse.reshape(-1)]
+
+
+def _read_obj_lines(path: Path, data: bytes, flip: bool) -> MeshData:
+    """Parse an OBJ file line by line (the reference reading, and the one that names a
+    problem's line)."""
     pos: list[list[float]] = []
     tex: list[list[float]] = []
     nrm: list[list[float]] = []
