@@ -89,6 +89,7 @@ def rules_module(rev: str | None):
     f.write_text(src)
     spec = importlib.util.spec_from_file_location("compare_at_rev", f)
     mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod          # dataclasses look their module up there
     spec.loader.exec_module(mod)
     return mod
 
