@@ -13,6 +13,8 @@ process whose kernels are cached, the everyday case.
     python benchmarks/bench_speed.py quality    [--size 200x150] [--rel-rmse 0.02] [SCENE ...]
     python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
     python benchmarks/bench_speed.py report     [--quick] [--against COMMIT [--rounds 2]]
+    python benchmarks/bench_speed.py process    [--size 640x480] [--spp 16] [--repeat 5]
+                                                [--triangles 160000] [--ply-triangles 1000000]
     python benchmarks/bench_speed.py all        (all of them at their defaults, but memory
                                                  at 16 spp: 256 spp takes about 15 minutes
                                                  on a 2-core CPU)
@@ -460,6 +462,218 @@ def cmd_report(args) -> int:
     return 0
 
 
+
+# ------------------------------------------------------------------ 7. whole process, meshes
+
+
+PROCESS_SCENE = """
+[film]
+width = {w}
+height = {h}
+spp = {spp}
+max_depth = 2
+
+[camera]
+origin = [0, 4.5, 7]
+target = [0, 0, 0]
+fov = 45
+
+[materials.clay]
+type = "diffuse"
+reflectance = [0.7, 0.5, 0.3]
+
+[materials.floor]
+type = "diffuse"
+reflectance = 0.5
+
+[[lights]]
+type = "point"
+position = [2, 6, 4]
+intensity = 60
+
+[[shapes]]
+type = "rectangle"
+material = "floor"
+to_world = [ {{ scale = [8, 8, 1] }}, {{ rotate = {{ axis = [1, 0, 0], angle = -90 }} }},
+             {{ translate = [0, -0.6, 0] }} ]
+
+[groups.mesh]
+[[groups.mesh.shapes]]
+type = "mesh"
+file = "{mesh}"
+material = "clay"
+{instances}
+"""
+
+#: A whole Python process that imports Mitsuba, loads the exported scene and renders it.
+MITSUBA_PROCESS = """
+import sys
+import mitsuba as mi
+mi.set_variant("llvm_ad_rgb")
+scene = mi.load_file(sys.argv[1])
+mi.util.write_bitmap(sys.argv[2], mi.render(scene))
+"""
+
+#: The tracer's first render in a fresh process, split: import, mesh read, rest of the
+#: scene load, Integrator (BVH builds), render, EXR.
+SPLIT = """
+import sys, time
+t0 = time.perf_counter()
+from whitted.tracer import load_scene, meshio
+from whitted.tracer.integrator import Integrator
+from whitted.tracer.imageio import write_image
+t1 = time.perf_counter()
+read = [0.0]
+load_mesh = meshio.load_mesh
+def timed_load(*a, **k):
+    t = time.perf_counter()
+    try:
+        return load_mesh(*a, **k)
+    finally:
+        read[0] += time.perf_counter() - t
+meshio.load_mesh = timed_load
+scene = load_scene(sys.argv[1])  # its film: the size and spp of the command lines
+t2 = time.perf_counter()
+integ = Integrator(scene)
+t3 = time.perf_counter()
+result = integ.render()
+t4 = time.perf_counter()
+write_image(sys.argv[2], result.image)
+t5 = time.perf_counter()
+print(t1 - t0, read[0], t2 - t1 - read[0], t3 - t2, t4 - t3, t5 - t4)
+"""
+
+
+def _torus(segments: int, sides: int):
+    """A torus (radii 1 and 0.35) of 2 x segments x sides triangles, with its normals and
+    a uv grid."""
+    import numpy as np
+
+    u = np.arange(segments) * 2 * np.pi / segments
+    w = np.arange(sides) * 2 * np.pi / sides
+    uu, ww = np.meshgrid(u, w, indexing="ij")
+    p = np.stack([(1 + 0.35 * np.cos(ww)) * np.cos(uu), 0.35 * np.sin(ww),
+                  (1 + 0.35 * np.cos(ww)) * np.sin(uu)], -1).reshape(-1, 3)
+    n = np.stack([np.cos(ww) * np.cos(uu), np.sin(ww), np.cos(ww) * np.sin(uu)],
+                 -1).reshape(-1, 3)
+    uv = np.stack([uu / (2 * np.pi), ww / (2 * np.pi)], -1).reshape(-1, 2)
+    i, j = np.meshgrid(np.arange(segments), np.arange(sides), indexing="ij")
+    a, b = i * sides + j, (i + 1) % segments * sides + j
+    c, d = (i + 1) % segments * sides + (j + 1) % sides, i * sides + (j + 1) % sides
+    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                        np.stack([a, c, d], -1).reshape(-1, 3)])
+    return p, n, uv, f
+
+
+def write_process_scenes(folder: Path, triangles: int, ply_triangles: int, size: tuple,
+                         spp: int) -> list[Path]:
+    """The 160,000-triangle OBJ torus (v, vt, vn; v/vt/vn corners) placed 4 times, and a
+    1,000,000-triangle binary PLY knot placed twice; each a scene beside its mesh."""
+    sys.path.insert(0, str(ROOT / "scenes" / "meshes"))
+    from generate import torus_knot
+
+    from whitted.tracer.meshio import write_ply
+
+    sides = 200
+    p, n, uv, f = _torus(max(3, triangles // (2 * sides)), sides)
+    obj = folder / "torus.obj"
+    with open(obj, "w") as fh:
+        fh.write("# a torus written by bench_speed.py process\no torus\n")
+        fh.write("".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in p.tolist()))
+        fh.write("".join(f"vt {x:.6g} {y:.6g}\n" for x, y in uv.tolist()))
+        fh.write("".join(f"vn {x:.6g} {y:.6g} {z:.6g}\n" for x, y, z in n.tolist()))
+        fh.write("".join(f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}\n"
+                         for a, b, c in (f + 1).tolist()))
+    v, fk = torus_knot(max(3, ply_triangles // 200), 100)
+    ply = folder / "knot.ply"
+    write_ply(ply, v * 0.8, fk)
+
+    def instances(places):
+        return "".join(
+            f'\n[[shapes]]\ntype = "instance"\ngroup = "mesh"\nto_world = [ {{ rotate = '
+            f'{{ axis = [0, 1, 0], angle = {angle} }} }}, {{ translate = [{x}, 0, {z}] }} ]\n'
+            for x, z, angle in places)
+
+    scenes = []
+    for mesh, places in ((obj, [(-1.6, -1.2, 0), (1.6, -1.2, 30), (-1.6, 1.4, 60),
+                                (1.6, 1.4, 90)]),
+                         (ply, [(-1.4, 0, 0), (1.4, 0, 45)])):
+        scene = folder / f"{mesh.stem}.toml"
+        scene.write_text(PROCESS_SCENE.format(mesh=mesh, instances=instances(places),
+                                              w=size[0], h=size[1], spp=spp))
+        scenes.append(scene)
+    return scenes
+
+
+def _fresh_env(folder: Path) -> dict:
+    """An environment whose caches are empty: HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR
+    (Dr.Jit's kernel cache, ~/.drjit unless that is set) in a new folder."""
+    env = dict(os.environ)
+    home = Path(tempfile.mkdtemp(dir=folder))
+    env.update(HOME=str(home), XDG_CACHE_HOME=str(home / ".cache"),
+               DRJIT_CACHE_DIR=str(home / ".drjit"))
+    return env
+
+
+def _timed_process(cmd: list, env: dict | None) -> float:
+    t0 = time.perf_counter()
+    subprocess.run([str(c) for c in cmd], env=env, check=True, stdout=subprocess.DEVNULL,
+                   stderr=subprocess.DEVNULL)
+    return time.perf_counter() - t0
+
+
+def cmd_process(args) -> int:
+    w, h = args.size
+    size = f"{w}x{h}"
+    print(f"whole process with meshes: {size}, {args.spp} spp, medians of {args.repeat} "
+          f"(each side alternating); commit {commit()}; {machine_note()}", flush=True)
+    with tempfile.TemporaryDirectory() as tmp:
+        tmp = Path(tmp)
+        script = tmp / "mitsuba_direct.py"
+        script.write_text(MITSUBA_PROCESS)
+        split = tmp / "split.py"
+        split.write_text(SPLIT)
+        for scene in write_process_scenes(tmp, args.triangles, args.ply_triangles, args.size,
+                                          args.spp):
+            mesh = next(tmp.glob(scene.stem + ".*[jy]"))
+            xml = tmp / f"{scene.stem}.xml"
+            run_child([BIN / "whitted", "export", scene, "--integrator", "direct", "--size",
+                       size, "--spp", str(args.spp), "-o", xml])
+            tracer_cmd = [BIN / "whitted", "render", scene, "-o", tmp / "x.exr", "--size",
+                          size, "--spp", str(args.spp)]
+            mitsuba_cmd = [sys.executable, script, xml, tmp / "m.exr"]
+            print(f"  {scene.stem}: {mesh.name} {mesh.stat().st_size / 1e6:.1f} MB",
+                  flush=True)
+            for label, fresh in (("cold", True), ("warm", False)):
+                if not fresh:  # fill the caches of this user's HOME first
+                    _timed_process(tracer_cmd, None)
+                    _timed_process(mitsuba_cmd, None)
+                times = {"tracer": [], "mitsuba": []}
+                for _ in range(args.repeat):
+                    for side, cmd in (("tracer", tracer_cmd), ("mitsuba", mitsuba_cmd)):
+                        env = _fresh_env(tmp) if fresh else None
+                        times[side].append(_timed_process(cmd, env))
+                t, m = (statistics.median(times[k]) for k in ("tracer", "mitsuba"))
+                print(f"    {label}: whitted render {t:6.2f} s [{min(times['tracer']):.2f}-"
+                      f"{max(times['tracer']):.2f}]  Mitsuba direct (Python process) "
+                      f"{m:6.2f} s [{min(times['mitsuba']):.2f}-{max(times['mitsuba']):.2f}]"
+                      f"  ratio {t / m:.2f} (target <= 1.0: {verdict(t <= m)})", flush=True)
+            rows = []
+            for _ in range(args.repeat):
+                out = subprocess.run([sys.executable, split, scene, tmp / "s.exr"],
+                                     capture_output=True, text=True, check=True)
+                rows.append([float(x) for x in out.stdout.split()[-6:]])
+            med = [statistics.median(col) for col in zip(*rows, strict=True)]
+            names = ("import", "mesh read", "rest of scene load", "Integrator (BVH)",
+                     "render", "EXR")
+            print("    tracer in-process, first of a process (warm caches), medians: "
+                  + ", ".join(f"{k} {x:.3f} s" for k, x in zip(names, med, strict=True)),
+                  flush=True)
+    print("  the cold runs have empty HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR (Dr.Jit's "
+          "kernel cache); Python's own bytecode caches stay warm")
+    return 0
+
+
 # ------------------------------------------------------------------ main
 
 
@@ -514,10 +728,20 @@ def main(argv=None) -> int:
     rp.add_argument("--rounds", type=lambda v: max(1, int(v)), default=2,
                     help="rounds of the two reports with --against (default 2)")
 
+    pr = sub.add_parser("process", help="whole `whitted render` process against a whole "
+                        "Python process rendering with Mitsuba's direct, on mesh scenes, "
+                        "cold and warm")
+    pr.add_argument("--size", type=_size, default=(640, 480))
+    pr.add_argument("--spp", type=int, default=16)
+    pr.add_argument("--repeat", type=int, default=5)
+    pr.add_argument("--triangles", type=int, default=160_000)
+    pr.add_argument("--ply-triangles", type=int, default=1_000_000)
+
     sub.add_parser("all", help="every subcommand at its defaults (memory at 16 spp)")
     args = p.parse_args(argv)
     cmds = {"direct": cmd_direct, "mesh": cmd_mesh, "recursion": cmd_recursion,
-            "quality": cmd_quality, "memory": cmd_memory, "report": cmd_report}
+            "quality": cmd_quality, "memory": cmd_memory, "report": cmd_report,
+            "process": cmd_process}
     if args.cmd == "all":
         for c in cmds:
             extra = ["--spp", "16"] if c == "memory" else []
