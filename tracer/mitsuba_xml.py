@@ -107,6 +107,12 @@ class Imported:
     notes: dict = field(default_factory=dict)
     #: one line per kind of substitution made under ``approximate`` (outside the subset)
     warnings: list = field(default_factory=list)
+    #: TOML path ("camera", "film", "shapes[3]", "lights[0]", "materials.glass",
+    #: "materials.glass.reflectance") -> the XML element it came from ("file:line: <tag ...>")
+    origins: dict = field(default_factory=dict)
+    #: where Mitsuba's reading departs from the usual meaning of the XML (imported as
+    #: Mitsuba reads it, e.g. a rotation about an axis that is not a unit vector)
+    cautions: list = field(default_factory=list)
 
     @property
     def approximate(self) -> bool:
@@ -386,6 +392,29 @@ def _check_len(node: Node, v: list, n: int) -> list:
     return v
 
 
+#: How far from 1 a rotation axis's length may be and still be read as a unit axis (its
+#: three numbers written to 7 or more digits).
+UNIT_AXIS = 1e-6
+
+
+def mitsuba_rotate(axis, angle_deg: float) -> np.ndarray:
+    """Mitsuba 3.9.1's ``<rotate>``: Rodrigues' formula with the axis *as written*,
+    c I + (1 - c) a a^T + s [a]x (Dr.Jit's ``rotate``; the XML parser does not normalise
+    the axis). For a unit axis it is the rotation; otherwise it also scales and shears."""
+    a = np.asarray(axis, dtype=np.float64)
+    t = math.radians(angle_deg)
+    c, s = math.cos(t), math.sin(t)
+    ax = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    m = np.eye(4)
+    m[:3, :3] = c * np.eye(3) + (1 - c) * np.outer(a, a) + s * ax
+    return m
+
+
+def unit_axis(axis) -> bool:
+    """Is the axis of a ``<rotate>`` a unit vector (then Mitsuba's step is a rotation)?"""
+    return abs(math.sqrt(sum(float(x) * float(x) for x in axis)) - 1) <= UNIT_AXIS
+
+
 def transform_matrix(node: Node) -> np.ndarray:
     """A ``<transform>`` element as a 4x4 matrix: its steps applied first to last."""
     steps = []
@@ -401,7 +430,9 @@ def transform_matrix(node: Node) -> np.ndarray:
             axis = _xyz(s)
             if not any(axis):
                 raise XMLImportError(f"{s.where()}: a rotation needs a non-zero axis")
-            steps.append(tf.rotate(axis, _attr_number(s, "angle", 0.0)))
+            angle = _attr_number(s, "angle", 0.0)
+            steps.append(tf.rotate(axis, angle) if unit_axis(axis) else
+                         mitsuba_rotate(axis, angle))
         elif s.tag == "matrix":
             v = _floats(s, s.attrs.get("value"))
             if len(v) == 9:  # a 3x3 matrix (Mitsuba accepts it for to_uv)
@@ -471,6 +502,8 @@ class _Importer:
         self.out: dict = {"film": {}, "camera": {}, "materials": {}, "lights": [],
                           "shapes": []}
         self.notes: dict[str, list[str]] = {}
+        self.origins: dict[str, str] = {}
+        self.cautions: list[str] = []
         self.warnings: list[str] = []
         self._warned: set[str] = set()
         self.material_ids: dict[int, str] = {}   # id(bsdf node) -> material name
@@ -484,6 +517,13 @@ class _Importer:
         lst = self.notes.setdefault(where, [])
         if text not in lst:
             lst.append(text)
+
+    def caution(self, node: Node, text: str) -> None:
+        """Say where Mitsuba's reading departs from the usual meaning (imported as Mitsuba
+        reads it; not an approximation)."""
+        line = f"{node.where()}: {text}"
+        if line not in self.cautions:
+            self.cautions.append(line)
 
     def outside(self, node: Node, what: str, nearest: str | None, where: str) -> None:
         """Refuse an element outside the subset, or note its substitute under ``approximate``."""
@@ -569,6 +609,8 @@ class _Importer:
 
     def texture(self, node: Node, where: str):
         p = self.props(node)
+        if "name" in node.attrs:
+            self.origins.setdefault(f"{where}.{node.attrs['name']}", node.where())
         if node.type == "checkerboard":
             tex = {"color0": self.color(p.get("color0"), where, [0.4] * 3),
                    "color1": self.color(p.get("color1"), where, [0.2] * 3)}
@@ -587,6 +629,11 @@ class _Importer:
                     bm[k] = self.string(p[k])
             if "raw" in p:
                 bm["raw"] = self.boolean(p["raw"])
+            if "to_uv" in p:   # Mitsuba's bitmap: the 4x4's 2D affine part (x, y, translation)
+                m = transform_matrix(p["to_uv"])
+                rows = [[float(m[i, 0]), float(m[i, 1]), float(m[i, 3])] for i in (0, 1)]
+                if rows != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]:
+                    bm["to_uv"] = rows
             return {"bitmap": bm}
         self.outside(node, f'texture "{_short(node.type)}"', None, where)
 
@@ -604,7 +651,19 @@ class _Importer:
                     [_attr_number(s, k, 1.0) for k in "xyz"]
                 steps.append({"scale": v[0] if len(set(v)) == 1 else v})
             elif s.tag == "rotate":
-                steps.append({"rotate": {"axis": _xyz(s), "angle": _attr_number(s, "angle", 0.0)}})
+                axis, angle = _xyz(s), _attr_number(s, "angle", 0.0)
+                if not any(axis):
+                    raise XMLImportError(f"{s.where()}: a rotation needs a non-zero axis")
+                if unit_axis(axis):
+                    steps.append({"rotate": {"axis": axis, "angle": angle}})
+                    continue
+                self.caution(s, f"a rotation axis of length "
+                                f"{math.sqrt(sum(x * x for x in axis)):.6g}: Mitsuba 3.9.1 does "
+                                "not normalise it, so the step also scales and shears (Rodrigues' "
+                                "formula with the axis as written); imported as Mitsuba's matrix, "
+                                "not as the rotation the usual meaning would give")
+                m = mitsuba_rotate(axis, angle)
+                steps.append({"matrix": [[float(x) for x in row] for row in m]})
             else:
                 break
         else:
@@ -670,7 +729,7 @@ class _Importer:
         data = {k: v for k, v in self.out.items() if v or k in ("film", "camera")}
         data["description"] = f"Imported from Mitsuba XML {self.path.name}"
         notes = {k: v for k, v in self.notes.items() if v}
-        return Imported(data, notes, self.warnings)
+        return Imported(data, notes, self.warnings, self.origins, self.cautions)
 
     def integrator(self, node: Node) -> None:
         p = self.props(node)
@@ -704,6 +763,7 @@ class _Importer:
         p = self.props(node)
         cam: dict = self.out["camera"]
         kind = node.type
+        self.origins["camera"] = node.where()
         if kind == "thinlens":
             self.outside(node, "a thin-lens camera (depth of field)", "a pinhole perspective",
                          "camera")
@@ -755,6 +815,8 @@ class _Importer:
     def film(self, node: Node | None) -> tuple[int, int]:
         film = self.out["film"]
         p = self.props(node) if node is not None else {}
+        if node is not None:
+            self.origins["film"] = node.where()
         if node is not None and node.type != "hdrfilm":
             self.outside(node, f'film "{_short(node.type)}"', "hdrfilm", "film")
         film["width"] = self.integer(p.get("width"), 768)
@@ -817,6 +879,7 @@ class _Importer:
             i += 1
             name = f"{base}_{i}"
         self.material_ids[key] = name
+        self.origins[f"materials.{name}"] = node.where()
         self.out["materials"][name] = self.bsdf(node, f"materials.{name}", two_sided=False)
         return name
 
@@ -935,6 +998,7 @@ class _Importer:
             return
         if node.type not in LIGHTS:
             self.outside(node, f'emitter "{_short(node.type)}"', None, where)
+        self.origins[where] = node.where()
         m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
         self.out["lights"].append(getattr(self, LIGHTS[node.type])(node, p, m, where))
 
@@ -994,6 +1058,7 @@ class _Importer:
         p = self.props(node)
         kind = node.type
         shape: dict = {}
+        self.origins[where] = node.where()
         if kind == "instance":
             refs = [self.res.deref(c) for c in node.children if c.tag in ("ref", "shape")]
             gid = refs[0].attrs.get("id") if refs else None

@@ -539,7 +539,7 @@ def load_any(path: str | Path, approximate: bool = False, warn=None) -> Scene:
         from whitted.tracer.mitsuba_xml import read_xml
 
         imp = read_xml(path, approximate)
-        for line in imp.warnings:
+        for line in imp.warnings + imp.cautions:
             if warn is not None:
                 warn(line)
         return replace(parse_scene(imp.data, str(path)), approximate=imp.approximate)

@@ -40,7 +40,10 @@ def add_parser(sub) -> None:
                     "does not, 2 for bad input (an unreadable file, a size other than the "
                     "film's).")
     ck.add_argument("image", metavar="IMAGE", help="your renderer's image")
-    ck.add_argument("--scene", required=True, help="the scene it shows (.toml or built-in name)")
+    ck.add_argument("--scene", required=True,
+                    help="the scene it shows (.toml, built-in name, or Mitsuba 3 .xml: then "
+                         "the import is also checked against Mitsuba's reading of the "
+                         "original, a difference failing the check)")
     ck.add_argument("-o", "--output", default=None,
                     help="output folder (default: out/check/SCENE-IMAGE)")
     ck.add_argument("--encoding", choices=ENCODINGS, default=None,
@@ -99,6 +102,13 @@ def run(args) -> int:
                             "samples (reference.renderers.mitsuba.deterministic.SAMPLE_MAPS), "
                             "so Mitsuba's "
                             "deterministic reference cannot render it")
+    from whitted.reference.commands.common import resolve_scene
+    from whitted.reference.renderers.mitsuba.original import check_and_print, is_xml
+
+    # A scene given as XML: the reference renders its import, which the original judges.
+    path = resolve_scene(args.scene)
+    structure = check_and_print(path, getattr(args, "approximate", False)) \
+        if is_xml(path) else None
     from whitted.reference.check.judge import OUTPUT_NAMES, refuse_in_the_way
     from whitted.tracer.imageio import StagedFolder
 
@@ -117,5 +127,10 @@ def run(args) -> int:
         staged.commit()
     print(format_run(judged, title))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in judged.files.values()))
+    if structure is not None and not structure.agrees:
+        print(f"FAIL: the reference was rendered from the import, which differs from "
+              f"Mitsuba's reading of the original ({len(structure.findings)} structural "
+              "difference(s), printed above)")
+        return EXIT_FAIL
     return EXIT_OK if judged.passed else EXIT_FAIL
 

@@ -160,9 +160,11 @@ def run(args) -> int:
 
         luxcore.require()   # before anything renders
     scene = load_with_options(args)
+    structure = _structure(args)
     if args.renderer == "luxcore":
         check_render(scene)
-        return _compare_luxcore(args, scene)
+        status = _compare_luxcore(args, scene)
+        return status if structure is None or structure.agrees else EXIT_FAIL
     reference = _reference_option(args)
     if reference == "direct" and choose_test(comparable(scene), "direct") == "z-test":
         given = "--integrator" if args.integrator is not None else "--reference"
@@ -186,6 +188,11 @@ def run(args) -> int:
                                  seed=args.seed)
     print(format_comparison(result))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in result.files.values()))
+    if structure is not None and not structure.agrees:
+        print(f"FAIL: the images were rendered from the import, which differs from "
+              f"Mitsuba's reading of the original ({len(structure.findings)} structural "
+              "difference(s), printed above)")
+        return EXIT_FAIL
     if args.renderer == "all":
         try:
             return _compare_luxcore(args, scene, result)
@@ -195,6 +202,19 @@ def run(args) -> int:
             print(f"note: LuxCore (the third renderer's vote): not available: "
                   f"{one_line(str(e), 300)}", file=sys.stderr, flush=True)
     return EXIT_OK if result.passed else EXIT_FAIL
+
+
+def _structure(args):
+    """For a scene given as Mitsuba XML, its import judged by the original
+    (:func:`reference.renderers.mitsuba.original.compare_structure`), printed; else None.
+    Both sides render the import, so this is what sees an importer's mistake."""
+    from whitted.reference.commands.common import resolve_scene
+    from whitted.reference.renderers.mitsuba.original import check_and_print, is_xml
+
+    path = resolve_scene(args.scene)
+    if not is_xml(path):
+        return None
+    return check_and_print(path, getattr(args, "approximate", False))
 
 
 def _reference_option(args) -> str:

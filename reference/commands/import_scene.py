@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from whitted.reference.commands.common import shown
-from whitted.reference.commands.status import EXIT_OK
+from whitted.reference.commands.status import EXIT_FAIL, EXIT_OK
 
 
 def add_parser(sub) -> None:
@@ -22,8 +22,10 @@ def add_parser(sub) -> None:
     im.add_argument("-D", dest="param", action="append", metavar="NAME=VALUE",
                     help="value of a $NAME parameter of the file (overrides its <default>)")
     im.add_argument("--verify", action="store_true",
-                    help="also load the file with Mitsuba and check that the camera and film "
-                         "agree with Mitsuba's")
+                    help="also load the file with Mitsuba and check that Mitsuba's reading of "
+                         "the import agrees with its reading of the original, object by "
+                         "object (camera, film, shapes, BSDFs, emitters); exit 1 with the "
+                         "differences, nothing written, if not")
     im.set_defaults(func=run)
 
 
@@ -40,12 +42,22 @@ def run(args) -> int:
         if not sep or not name or not value.strip():
             raise UserError(f"-D {shown_item!r}: expected NAME=VALUE with a value")
         params[name] = value
-    scene, imp = write_import(args.xml, out, args.approximate, args.verify, **params)
-    for line in imp.warnings:
+    from whitted.reference.renderers.mitsuba.original import StructureMismatch
+
+    try:
+        scene, imp = write_import(args.xml, out, args.approximate, args.verify, **params)
+    except StructureMismatch as e:
+        print("\n".join(e.structure.lines()), flush=True)
+        print(f"nothing written: {shown(out)}", flush=True)
+        return EXIT_FAIL
+    for line in imp.warnings + imp.cautions:
         print(f"warning: {line}", flush=True)
+    if args.verify:
+        print(imp.structure.summary(), flush=True)
     n = sum(len(v) for v in imp.notes.values())
     print(f"wrote {shown(out)} ({len(scene.shapes)} shapes, {len(scene.lights)} lights; "
           f"{n} notes as comments" + (", APPROXIMATE" if imp.approximate else "")
-          + (", camera and film verified against Mitsuba" if args.verify else "") + ")")
+          + (", verified against Mitsuba's reading of the original" if args.verify else "")
+          + ")")
     return EXIT_OK
 

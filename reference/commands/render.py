@@ -12,7 +12,7 @@ from whitted.reference.commands.common import (
     use_backend,
 )
 from whitted.reference.commands.options import scene_opts
-from whitted.reference.commands.status import EXIT_OK
+from whitted.reference.commands.status import EXIT_FAIL, EXIT_OK
 
 
 def add_parser(sub) -> None:
@@ -27,6 +27,11 @@ def add_parser(sub) -> None:
     r.add_argument("--min-weight", type=float, default=0.0,
                    help="drop specular branches whose weight falls to this or below (a biased "
                         "speed-up; default 0: exact Whitted)")
+    r.add_argument("--verify", action="store_true",
+                   help="for a Mitsuba XML scene: before rendering, load the original with "
+                        "Mitsuba and check that its reading of the import agrees object by "
+                        "object (camera, shapes, BSDFs, emitters); exit 1 with the "
+                        "differences if not (without it, render never loads Mitsuba)")
     r.set_defaults(func=run)
 
 
@@ -39,6 +44,23 @@ def run(args) -> int:
 
         compile_lpe(args.lpe)  # refuse a bad expression before anything renders
     scene = load_with_options(args)
+    from whitted.reference.commands.common import resolve_scene
+
+    path = resolve_scene(args.scene)
+    xml = str(path).lower().endswith(".xml")
+    if args.verify:
+        from whitted.tracer.errors import UserError
+
+        if not xml:
+            raise UserError("--verify: checks a Mitsuba XML scene's import against Mitsuba's "
+                            f"reading of the original; {shown(args.scene)} is not .xml")
+        from whitted.reference.renderers.mitsuba.original import check_and_print
+
+        if not check_and_print(path, getattr(args, "approximate", False)).agrees:
+            return EXIT_FAIL
+    elif xml:
+        print("note: the import's structure is not checked against Mitsuba's reading of the "
+              "original (--verify checks it; render never loads Mitsuba without it)", flush=True)
     from whitted.tracer.limits import check_render
 
     check_render(scene)

@@ -57,6 +57,8 @@ class Bitmap:
     filter_type: str = "bilinear"  # or "nearest"
     raw: bool = False
     wrap_mode: str = "repeat"      # or "mirror", "clamp"
+    #: Mitsuba's ``to_uv``, its first two rows: uv' = (a u + b v + c, d u + e v + f)
+    to_uv: tuple = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
 
     def max(self) -> float:
         return float(self.texels.max()) if self.texels.size else 0.0
@@ -100,6 +102,7 @@ def _parse_bitmap(bm: Table, hi: float | None) -> Bitmap:
     filter_type = bm.string("filter_type", "bilinear", ("bilinear", "nearest"))
     raw = bm.boolean("raw", False)
     wrap = bm.string("wrap_mode", "repeat", WRAP_MODES)
+    to_uv = _parse_to_uv(bm)
     texels = load_bitmap(bm, "filename", path, raw)
     if not np.isfinite(texels).all() or texels.min() < 0:
         bm.fail("filename", f"{path.name}: texel values must be finite and >= 0")
@@ -107,7 +110,24 @@ def _parse_bitmap(bm: Table, hi: float | None) -> Bitmap:
         bm.fail("filename", f"{path.name}: texel values must be <= {hi:g} here, the largest "
                             f"is {texels.max():g}")
     bm.finish()
-    return Bitmap(str(path), texels, filter_type, raw, wrap)
+    return Bitmap(str(path), texels, filter_type, raw, wrap, to_uv)
+
+
+def _parse_to_uv(bm: Table) -> tuple:
+    """A bitmap's ``to_uv = [[a, b, c], [d, e, f]]`` (Mitsuba's ``to_uv``, an affine map of
+    the uv plane: uv' = (a u + b v + c, d u + e v + f)); identity by default."""
+    what = "[[a, b, c], [d, e, f]] (uv' = (a u + b v + c, d u + e v + f))"
+    row = {"type": "array", "items": {"type": "number"}, "minItems": 3, "maxItems": 3}
+    m = bm.raw("to_uv", None, what, {"type": "array", "items": row, "minItems": 2,
+                                     "maxItems": 2})
+    if m is None:
+        return ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+    if (not isinstance(m, list) or len(m) != 2 or
+            any(not isinstance(r, list) or len(r) != 3 for r in m) or
+            any(isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x)
+                for r in m for x in r)):
+        bm.fail("to_uv", f"expected {what}, got {show(m)}")
+    return tuple(tuple(float(x) for x in r) for r in m)
 
 
 def parse_texture(t: Table, key: str, default, hi: float | None = 1.0) -> Texture:
@@ -157,7 +177,7 @@ def scalar_texture(tex: Texture) -> float | Checkerboard | Bitmap:
     if isinstance(tex, Bitmap):
         grey = np.asarray(tex.texels, np.float64) @ np.asarray(LUMINANCE)
         texels = np.repeat(grey[..., None], 3, axis=-1).astype(np.float32)
-        return Bitmap(tex.filename, texels, tex.filter_type, tex.raw, tex.wrap_mode)
+        return Bitmap(tex.filename, texels, tex.filter_type, tex.raw, tex.wrap_mode, tex.to_uv)
     if isinstance(tex, Checkerboard):
         c0, c1 = scalar_texture(tex.color0), scalar_texture(tex.color1)
         return Checkerboard((c0,) * 3, (c1,) * 3, tex.scale)
@@ -203,6 +223,11 @@ class TextureTable:
                                               for b in bitmaps], bool)
             self.wrap = upload(jit.UInt32, [0 if b is None else WRAP_MODES.index(b.wrap_mode)
                                             for b in bitmaps], np.uint32)
+            ident = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0))
+            self.uv_moved = any(b is not None and b.to_uv != ident for b in bitmaps)
+            if self.uv_moved:   # Mitsuba's to_uv: an affine map of uv before the lookup
+                self.uv_u = col([ident[0] if b is None else b.to_uv[0] for b in bitmaps])
+                self.uv_v = col([ident[1] if b is None else b.to_uv[1] for b in bitmaps])
         boards = [b for _, b in rows]
         self.has_checker = any(b is not None for b in boards)
         if self.has_checker:
@@ -224,6 +249,10 @@ class TextureTable:
         if self.has_bitmap:
             on = gather(self.is_bitmap, row, active)
             size = gather(self.size, row, active)
+            if self.uv_moved:
+                ru, rv = gather(self.uv_u, row, active), gather(self.uv_v, row, active)
+                uv = type(uv)(dr.fma(ru.x, uv.x, dr.fma(ru.y, uv.y, ru.z)),
+                              dr.fma(rv.x, uv.x, dr.fma(rv.y, uv.y, rv.z)))
             image = texture.bitmap(uv, self.texels, gather(self.offset, row, active), size.x,
                                    size.y, gather(self.bilinear, row, active),
                                    gather(self.wrap, row, active), active & on)

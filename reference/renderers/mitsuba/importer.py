@@ -180,7 +180,10 @@ def write_import(source: str | Path, output: str | Path, approximate: bool = Fal
 
     Written only when complete and checked: the TOML loads as a scene
     (:func:`check_toml`) and, with ``verify``, Mitsuba's loading of ``source``
-    agrees on the camera and film (:func:`disagreements`); the file is renamed into
+    agrees on the camera and film (:func:`disagreements`) and with Mitsuba's reading of
+    the import object by object (:func:`reference.renderers.mitsuba.original.compare_structure`:
+    a difference raises its :class:`StructureMismatch`; the :class:`Structure` is left in
+    ``imp.structure``); the file is renamed into
     place from a temporary one, and on any failure the meshes converted for it are
     removed, so that nothing is left behind. A missing folder of ``output`` is made
     once everything is checked, and removed again if the writing fails."""
@@ -195,6 +198,15 @@ def write_import(source: str | Path, output: str | Path, approximate: bool = Fal
             if problems:
                 raise UserError(f"{one_line(str(source), 300)}: the import disagrees with "
                                 "Mitsuba's own loading: " + "; ".join(problems))
+            from whitted.reference.renderers.mitsuba.original import (
+                StructureMismatch,
+                compare_structure,
+            )
+
+            structure = compare_structure(source, scene, imp, approximate, **params)
+            if not structure.agrees:
+                raise StructureMismatch(structure)
+            imp.structure = structure
         folder = output.resolve().parent
         if not folder.is_dir():  # every check passed: only now is the folder made
             _make_folders(folder, created)
@@ -612,7 +624,10 @@ def imported_cases(quick: bool) -> list[ImportedCase]:
 
 
 def validate_case(case: ImportedCase, workdir: Path) -> dict:
-    """Import, render with the tracer, render the original on Mitsuba, and judge (agreement)."""
+    """Import, check the import's structure against Mitsuba's reading of the original
+    (:func:`reference.renderers.mitsuba.original.compare_structure`: a difference fails
+    the case), render with the tracer, render the original on Mitsuba, and judge
+    (agreement)."""
     import time
 
     from whitted.reference import mitsuba
@@ -630,13 +645,20 @@ def validate_case(case: ImportedCase, workdir: Path) -> dict:
     else:
         xml = case.xml
     imp = read_xml(xml)
-    scene = parse_scene(imp.data, str(xml)).with_overrides(max_depth=2, spp=case.spp)
+    imported = parse_scene(imp.data, str(xml))
+    from whitted.reference.renderers.mitsuba.original import compare_structure
+
+    structure = compare_structure(xml, imported, imp)   # the original judges the import
+    scene = imported.with_overrides(max_depth=2, spp=case.spp)
     _, ref_y, ref_var = render_original(source, case.integrator, spp=case.spp,
                                         passes=case.passes)
     t1 = time.perf_counter()
     _, test_y, test_var = render_imported(scene, seeds=case.passes)
     t2 = time.perf_counter()
     out = agreement(test_y, test_var, ref_y, ref_var)
+    out["images_passed"] = out["passed"]
+    out["structure"] = structure.to_json()
+    out["passed"] = bool(out["passed"] and structure.agrees)
     f = scene.film
     out.update(name=case.name, source=str(xml.name), integrator=(
         "direct" if case.integrator == "direct" else "path, max_depth 2"),

@@ -300,6 +300,8 @@ def to_dict(tree: dict, mi) -> dict:
                 out[k] = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
             elif kind == "uvscale":
                 out[k] = mi.ScalarTransform3f().scale(mi.ScalarPoint2f(*val))
+            elif kind == "uvmatrix":
+                out[k] = mi.ScalarTransform3f(np.asarray(val, dtype=np.float64).tolist())
             elif kind in ("point", "vector"):
                 out[k] = mi.ScalarPoint3f(*val) if kind == "point" else mi.ScalarVector3f(*val)
             elif kind == "rgb":
@@ -387,6 +389,10 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
         elif kind == "uvscale":
             lines += [f'{pad}    <transform name="{k}">',
                       f'{pad}        <scale x="{_fmt(val[0])}" y="{_fmt(val[1])}"/>',
+                      f"{pad}    </transform>"]
+        elif kind == "uvmatrix":   # a 3x3 matrix: Mitsuba's XML takes it for to_uv
+            flat = " ".join(_fmt(x) for row in val for x in row)
+            lines += [f'{pad}    <transform name="{k}">', f'{pad}        <matrix value="{flat}"/>',
                       f"{pad}    </transform>"]
         elif kind in ("point", "vector"):
             lines.append(f'{pad}    <{kind} name="{k}" value="{", ".join(_fmt(x) for x in val)}"/>')

@@ -3,7 +3,7 @@
 A plugin is ``{"type": ..., key: value | nested plugin}``. Values are tagged
 tuples so that one tree serves both ``mi.load_dict`` and the XML writer
 (:mod:`reference.renderers.mitsuba.scene`): ``("rgb", (r, g, b))``, ``("point", (x, y, z))``,
-``("vector", ...)``, ``("matrix", 4x4)``, ``("uvscale", (su, sv))``,
+``("vector", ...)``, ``("matrix", 4x4)``, ``("uvscale", (su, sv))``, ``("uvmatrix", 3x3)``,
 ``("float", x)``, ``("integer", n)``, ``("boolean", b)``, ``("string", s)``.
 The conversions of the material and emitter kinds (``reference/materials/``,
 ``reference/emitters/``) build their trees with these helpers.
