@@ -3,15 +3,17 @@
 Writes the benchmark's torus knot (2 x segments x sides triangles, default
 144,000) as a binary PLY, an ascii PLY and an OBJ, plus a 2.9 MB OBJ of v and
 f lines and a 2.8 MB one of v/vt/vn lines (smaller knots, the latter with a uv
-grid and normals), and the big knot as a binary PLY of alternate quads and
-triangles (lists of two lengths), and prints for each the median, minimum and maximum time of
-``--repeat`` parses (the cache cleared before each) and of loads of the same
-unchanged file (cache hits). Then the time to load a scene with the 2.9 MB
-OBJ ten times (the cache cleared first).
+grid and normals), the big knot as a binary PLY of alternate quads and
+triangles (lists of two lengths), and the meshes of ``bench_speed.py
+process``: a 160,000-triangle torus as an OBJ of v, vt, vn and v/vt/vn
+corners, and a 1,000,000-triangle knot as a binary PLY; and prints for each the
+median, minimum and maximum time of ``--repeat`` parses (the cache cleared
+before each) and of loads of the same unchanged file (cache hits). Then the
+time to load a scene with the 2.9 MB OBJ ten times (the cache cleared first).
 
 ``--old FILE`` also times another version of the reader, a ``meshio.py``
 taken from the project's history (``git show REV:tracer/meshio.py > FILE``),
-on the same files in the same run, and says whether both give the same
+on the same files in the same run (the two readers alternating), and says whether both give the same
 vertices, faces, normals and uvs, bit for bit (the ascii PLY's positions
 differ where an older reader kept the text's float64 value of a coordinate
 declared ``float``; this one rounds it to float32, as binary files and
@@ -84,7 +86,46 @@ def write_files(folder: Path, segments: int, sides: int) -> list[Path]:
                        f"element face {q + q // 2}\n"
                        "property list uchar int vertex_indices\nend_header\n").encode()
                       + v.astype("<f4").tobytes() + b"".join(records))
-    return [binary, text, obj, small, vtn, mixed]
+    torus = folder / "torus_160k.obj"
+    write_torus_obj(torus, 160_000)
+    v, f = torus_knot(5000, 100)
+    big = folder / "knot_1M.ply"
+    write_ply(big, v, f)
+    return [binary, text, obj, small, vtn, mixed, torus, big]
+
+
+def torus(segments: int, sides: int):
+    """A torus (radii 1 and 0.35) of 2 x segments x sides triangles: positions, normals,
+    a uv grid and faces (0-based)."""
+    import numpy as np
+
+    u = np.arange(segments) * 2 * np.pi / segments
+    w = np.arange(sides) * 2 * np.pi / sides
+    uu, ww = np.meshgrid(u, w, indexing="ij")
+    p = np.stack([(1 + 0.35 * np.cos(ww)) * np.cos(uu), 0.35 * np.sin(ww),
+                  (1 + 0.35 * np.cos(ww)) * np.sin(uu)], -1).reshape(-1, 3)
+    n = np.stack([np.cos(ww) * np.cos(uu), np.sin(ww), np.cos(ww) * np.sin(uu)],
+                 -1).reshape(-1, 3)
+    uv = np.stack([uu / (2 * np.pi), ww / (2 * np.pi)], -1).reshape(-1, 2)
+    i, j = np.meshgrid(np.arange(segments), np.arange(sides), indexing="ij")
+    a, b = i * sides + j, (i + 1) % segments * sides + j
+    c, d = (i + 1) % segments * sides + (j + 1) % sides, i * sides + (j + 1) % sides
+    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
+                        np.stack([a, c, d], -1).reshape(-1, 3)])
+    return p, n, uv, f
+
+
+def write_torus_obj(path: Path, triangles: int, sides: int = 200) -> None:
+    """The torus of about ``triangles`` triangles as an OBJ of v, vt and vn lines and
+    v/vt/vn corners (15 MB at 160,000 triangles), as exporters write one."""
+    p, n, uv, f = torus(max(3, triangles // (2 * sides)), sides)
+    with open(path, "w") as fh:
+        fh.write("# a torus written by whitted's benchmarks\no torus\n")
+        fh.write("".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in p.tolist()))
+        fh.write("".join(f"vt {x:.6g} {y:.6g}\n" for x, y in uv.tolist()))
+        fh.write("".join(f"vn {x:.6g} {y:.6g} {z:.6g}\n" for x, y, z in n.tolist()))
+        fh.write("".join(f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}\n"
+                         for a, b, c in (f + 1).tolist()))
 
 
 SCENE = """
@@ -173,11 +214,18 @@ def main(argv=None) -> int:
             meshio.clear_cache()
             mesh = meshio.load_mesh(path)
             line = f"{path.name:15s} {path.stat().st_size / 1e6:5.1f} MB {len(mesh.faces):>8,} tri"
-            if old is not None:
-                t = timed(lambda p=path: (clear(old), old.load_mesh(p)), args.repeat)
+            def new_parse(p=path):
+                meshio.clear_cache()
+                meshio.load_mesh(p)
+
+            if old is not None:  # alternating: old, new, old, new, ...
+                t, parse = [], []
+                for _ in range(args.repeat):
+                    t += timed(lambda p=path: (clear(old), old.load_mesh(p)), 1)
+                    parse += timed(new_parse, 1)
                 line += f"  old {show(t)}"
-            parse = timed(lambda p=path: (meshio.clear_cache(), meshio.load_mesh(p)),
-                          args.repeat)
+            else:
+                parse = timed(new_parse, args.repeat)
             meshio.load_mesh(path)
             cached = timed(lambda p=path: meshio.load_mesh(p), args.repeat)
             line += f"  parse {show(parse)}  cached {show(cached)}"

@@ -544,46 +544,18 @@ print(t1 - t0, read[0], t2 - t1 - read[0], t3 - t2, t4 - t3, t5 - t4)
 """
 
 
-def _torus(segments: int, sides: int):
-    """A torus (radii 1 and 0.35) of 2 x segments x sides triangles, with its normals and
-    a uv grid."""
-    import numpy as np
-
-    u = np.arange(segments) * 2 * np.pi / segments
-    w = np.arange(sides) * 2 * np.pi / sides
-    uu, ww = np.meshgrid(u, w, indexing="ij")
-    p = np.stack([(1 + 0.35 * np.cos(ww)) * np.cos(uu), 0.35 * np.sin(ww),
-                  (1 + 0.35 * np.cos(ww)) * np.sin(uu)], -1).reshape(-1, 3)
-    n = np.stack([np.cos(ww) * np.cos(uu), np.sin(ww), np.cos(ww) * np.sin(uu)],
-                 -1).reshape(-1, 3)
-    uv = np.stack([uu / (2 * np.pi), ww / (2 * np.pi)], -1).reshape(-1, 2)
-    i, j = np.meshgrid(np.arange(segments), np.arange(sides), indexing="ij")
-    a, b = i * sides + j, (i + 1) % segments * sides + j
-    c, d = (i + 1) % segments * sides + (j + 1) % sides, i * sides + (j + 1) % sides
-    f = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                        np.stack([a, c, d], -1).reshape(-1, 3)])
-    return p, n, uv, f
-
-
 def write_process_scenes(folder: Path, triangles: int, ply_triangles: int, size: tuple,
                          spp: int) -> list[Path]:
     """The 160,000-triangle OBJ torus (v, vt, vn; v/vt/vn corners) placed 4 times, and a
     1,000,000-triangle binary PLY knot placed twice; each a scene beside its mesh."""
     sys.path.insert(0, str(ROOT / "scenes" / "meshes"))
+    from bench_mesh_load import write_torus_obj
     from generate import torus_knot
 
     from whitted.tracer.meshio import write_ply
 
-    sides = 200
-    p, n, uv, f = _torus(max(3, triangles // (2 * sides)), sides)
     obj = folder / "torus.obj"
-    with open(obj, "w") as fh:
-        fh.write("# a torus written by bench_speed.py process\no torus\n")
-        fh.write("".join(f"v {x:.7g} {y:.7g} {z:.7g}\n" for x, y, z in p.tolist()))
-        fh.write("".join(f"vt {x:.6g} {y:.6g}\n" for x, y in uv.tolist()))
-        fh.write("".join(f"vn {x:.6g} {y:.6g} {z:.6g}\n" for x, y, z in n.tolist()))
-        fh.write("".join(f"f {a}/{a}/{a} {b}/{b}/{b} {c}/{c}/{c}\n"
-                         for a, b, c in (f + 1).tolist()))
+    write_torus_obj(obj, triangles)
     v, fk = torus_knot(max(3, ply_triangles // 200), 100)
     ply = folder / "knot.ply"
     write_ply(ply, v * 0.8, fk)
