@@ -30,3 +30,11 @@ def mitsuba():
 
 
 _registered: set[str] = set()
+
+
+def mitsuba_error(e: Exception) -> str:
+    """Mitsuba's message of an exception: its last line that says something, cut."""
+    from whitted.tracer.errors import one_line
+
+    lines = [x.strip() for x in str(e).splitlines() if x.strip()]
+    return one_line(lines[-1] if lines else type(e).__name__, 300)

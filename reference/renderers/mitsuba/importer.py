@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from whitted.reference import mitsuba_error
 from whitted.scenes import MITSUBA_DATA_DIR
 from whitted.tracer.errors import UserError, one_line
 from whitted.tracer.mitsuba_xml import Imported, read_xml
@@ -329,12 +330,6 @@ def check_serialized(path: Path, index: int) -> tuple[int, int]:
     return vertices, faces
 
 
-def _mitsuba_error(e: Exception) -> str:
-    """Mitsuba's message of an exception: its last line that says something, cut."""
-    lines = [x.strip() for x in str(e).splitlines() if x.strip()]
-    return one_line(lines[-1] if lines else type(e).__name__, 300)
-
-
 def _serialized_converter(folder: Path, stem: str, created: list | None = None):
     """``convert(file, index)``: a Mitsuba ``serialized`` mesh written as OBJ by Mitsuba.
 
@@ -357,7 +352,7 @@ def _serialized_converter(folder: Path, stem: str, created: list | None = None):
                                  "shape_index": index})
         except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
             raise UserError(f"Mitsuba cannot read {one_line(source.name, 60)}: "
-                            f"{_mitsuba_error(e)}") from None
+                            f"{mitsuba_error(e)}") from None
         p = mi.traverse(mesh)
 
         def arr(key, n):
@@ -479,7 +474,7 @@ def mitsuba_view(path: str | Path, **params) -> dict:
         scene = mi.load_file(str(path), **params)
     except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
         raise UserError(f"{one_line(str(path), 300)}: Mitsuba cannot load it: "
-                        f"{_mitsuba_error(e)}") from None
+                        f"{mitsuba_error(e)}") from None
     sensor = scene.sensors()[0]
     p = mi.traverse(sensor)
     out = {"to_world": np.asarray(p["to_world"].matrix, dtype=np.float64).reshape(4, 4),

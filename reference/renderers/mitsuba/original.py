@@ -443,8 +443,7 @@ def compare_structure(source: str | Path, scene=None, imported=None,
     >>> s = compare_structure("tests/data/real_scenes/mitsuba-data/scenes/hello.xml")
     >>> s.agrees, s.summary()   # doctest: +SKIP
     """
-    from whitted.reference import mitsuba
-    from whitted.reference.renderers.mitsuba.importer import _mitsuba_error
+    from whitted.reference import mitsuba, mitsuba_error
     from whitted.reference.renderers.mitsuba.scene import scene_tree, to_dict
 
     if imported is None or scene is None:
@@ -469,7 +468,7 @@ def compare_structure(source: str | Path, scene=None, imported=None,
             # e.g. cbox_pol.xml's `stokes` integrator, which only a polarized variant
             # loads (the import approximated it): nothing to compare, and said so
             return Structure(unchecked=f"Mitsuba ({mi.variant()}) cannot load it: "
-                                       f"{_mitsuba_error(e)}")
+                                       f"{mitsuba_error(e)}")
         converted = mi.load_dict(to_dict(scene_tree(scene, "direct"), mi), optimize=False)
     finally:
         if threads < 2:
