@@ -1,14 +1,15 @@
 """``type = "background"``: the radiance a ray that hits nothing brings back, and nothing else.
 
-A backdrop: in the classic model's recursion (Whitted 1980; Heckbert's
-minray returns its ambient colour for a ray that misses every sphere) a
-trace call whose ray leaves the scene returns the background colour. It
-lights nothing (shading points do not sample it: that would be Mitsuba's
-``constant`` environment) and, like everything else a trace call returns, it
-is a hit term: counted for rays the tracer still shades, depth < max_depth
-(:mod:`tracer.emitters.base`), so that max_depth = DEPTH + 1 reproduces
-Heckbert's DEPTH. Its Mitsuba counterpart is the ``whitted_background``
-emitter of ``reference/emitters/background.py``.
+A backdrop, L = ``radiance`` for a ray that hits nothing: in the classic
+model's recursion (Whitted 1980; Heckbert's minray returns its ambient
+colour for a ray that misses every sphere) a trace call whose ray leaves the
+scene returns the background colour. It lights nothing (shading points do
+not sample it: that would be Mitsuba's ``constant`` environment) and, like
+everything else a trace call returns, it is a hit term: counted for rays the
+tracer still shades, depth < max_depth (:mod:`tracer.emitters.base`), so
+that max_depth = DEPTH + 1 reproduces Heckbert's DEPTH. Its Mitsuba
+counterpart is the ``whitted_background`` emitter of
+``reference/emitters/background.py``.
 """
 
 from __future__ import annotations

@@ -1,12 +1,15 @@
 """``type = "constant"``: the same radiance from every direction (Mitsuba's ``constant``).
 
-An environment at infinity: a ray that hits nothing brings its radiance back
-(not a hit term: seen by rays of every segment, as Mitsuba's environment
-emitters are), and shading points sample it as a light, one direction
-uniform on the sphere per sample (pdf 1 / (4 pi), so the estimate of the
-integral of L d(omega) is 4 pi L; :func:`tracer.lights.sample_uniform_direction`),
-the shadow ray reaching to infinity. Directions below the surface get
-cos <= 0 and add nothing.
+An environment at infinity, L(d) = ``radiance`` for every direction d
+(pbrt-v4, section 12.5.1, ``UniformInfiniteLight``; Mitsuba 3's plugin
+reference, ``constant``, its counterpart,
+``reference/emitters/constant.py``): a ray that hits nothing brings its
+radiance back (not a hit term: seen by rays of every segment, as Mitsuba's
+environment emitters are), and shading points sample it as a light, one
+direction uniform on the sphere per sample (pdf 1 / (4 pi), so the estimate
+of the integral of L d(omega) is 4 pi L;
+:func:`tracer.lights.sample_uniform_direction`), the shadow ray reaching to
+infinity. Directions below the surface get cos <= 0 and add nothing.
 """
 
 from __future__ import annotations

@@ -1,9 +1,9 @@
 """``type = "directional"``: light arriving from one direction, irradiance E (W/m^2).
 
 E is measured on a plane normal to the light, so the incident factor is E,
-constant, and the shadow ray is unbounded (lecture 1, "Directional lights";
-:func:`tracer.lights.directional`). Mitsuba's ``directional`` emitter is the
-same (``reference/emitters/directional.py``).
+constant, and the shadow ray is unbounded (lecture 2, "Point and directional
+lights"; :func:`tracer.lights.directional`). Mitsuba's ``directional``
+emitter is the same (``reference/emitters/directional.py``).
 """
 
 from __future__ import annotations

@@ -1,7 +1,9 @@
 """``type = "envmap"``: an environment map at infinity (Mitsuba's ``envmap``), a lat-long image.
 
-A ray that escapes brings back the image's radiance in its direction d
-(times ``scale``), looked up as Mitsuba 3.9.1's ``envmap`` looks it up
+A ray that escapes brings back the image's radiance in its direction d,
+L(d) = ``scale`` x image(u, v) (an image infinite light: pbrt-v4, section
+12.5.2, whose map is equal-area octahedral, not lat-long; Mitsuba 3's plugin
+reference, ``envmap``), looked up as Mitsuba 3.9.1's ``envmap`` looks it up
 (:func:`tracer.texture.latlong`): in the map's own frame (``to_world``'s
 inverse applied to d), u = atan2(d.x, -d.z) / (2 pi) runs along the columns
 and v = acos(d.y) / pi down the rows, +y the top row; bilinear between texel

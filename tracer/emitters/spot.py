@@ -1,9 +1,16 @@
 """``type = "spot"``: a point light restricted to a cone, Mitsuba's profile.
 
 Incident factor I falloff(theta) / r^2: full intensity inside ``beam_width``,
-falling linearly in the angle to zero at ``cutoff_angle`` (lecture 1, "Spot
-lights"; :func:`tracer.lights.spot`). Mitsuba's ``spot`` emitter is the same
-(``reference/emitters/spot.py``).
+falling linearly in the angle to zero at ``cutoff_angle`` (lecture 2,
+"Falloff, spot lights"; :func:`tracer.lights.spot`):
+
+    falloff(theta) = 1 for theta <= beam_width,
+                     (cutoff_angle - theta) / (cutoff_angle - beam_width) up to cutoff_angle,
+                     0 beyond.
+
+Mitsuba's ``spot`` emitter is the same profile (Mitsuba 3's plugin
+reference, ``spot``; ``reference/emitters/spot.py``), not pbrt-v4's
+smoothstep (section 12.2.1).
 
 An optional ``texture`` (a slide projected by the spot, Mitsuba's textured
 spot) multiplies the intensity by its colour at

@@ -4,7 +4,11 @@ The law of reflection (lecture 1, "Reflection") with the weight
 ``specular_reflectance`` x R(theta_i), R the Fresnel reflectance of a
 conductor of complex index eta + i k (pbrt-v4, section 9.3 and
 ``ConductorBxDF`` in its smooth limit; Mitsuba 3's ``conductor``):
-:func:`tracer.fresnel.fresnel_conductor`. The index is Mitsuba's named
+:func:`tracer.fresnel.fresnel_conductor`: R = (R_s + R_p) / 2, the
+reflectances of the two polarisations for cos_t = sqrt(1 - sin^2(theta_i) /
+(eta + i k)^2), in Born and Wolf's real arithmetic ("Principles of Optics",
+7th ed., section 14.2); k = 0 gives a dielectric's R, and eta = 0, k = 1
+gives R = 1 at every angle. The index is Mitsuba's named
 conductor (``material = "Au"``, the RGB values of :mod:`tracer.ior`) or given
 as ``eta`` and ``k``. ``two_sided = false`` makes it black from behind, as
 Mitsuba's bare ``conductor`` is. Mitsuba's counterpart is ``conductor``

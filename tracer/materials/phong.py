@@ -1,14 +1,24 @@
 """``type = "phong"``: a Lambertian part plus a normalised Phong or Blinn-Phong lobe.
 
-f(wi, wo) = kd / pi + ks N(p) cos^p(alpha), both parts smooth (summed over
-the lights), with ``model`` choosing the angle alpha (Phong 1975, in the
-reciprocal form of Lafortune and Willems 1994; or Blinn 1977's half vector)
-and N(p) the normalisation that makes the lobe conserve energy; the
-formulas and their sources are in :mod:`tracer.phong`. ``ambient`` is the
-lecture's constant ambient term ("the cheapest of all hacks"), added at
-every hit as light arriving through the diffuse part; Mitsuba has none, so a
-scene declares it tracer-only. Mitsuba's counterpart is the ``whitted_phong``
-BSDF written in ``reference/materials/phong.py``.
+    f(wi, wo) = kd / pi + ks N(p) cos^p(alpha),
+
+both parts smooth (summed over the lights; lecture 2, "Specular highlights":
+the Phong exponent p, the reflected light direction, the halfway vector),
+with ``model`` choosing the angle alpha and N(p) the normalisation that makes
+the lobe conserve energy (kd + ks <= 1 in every channel):
+
+* ``"phong"``: alpha between wo and the mirror image of wi, N = (p + 2) / (2 pi)
+  (Phong, CACM 18(6), 1975, in the reciprocal form of Lafortune and Willems,
+  KU Leuven CW 197, 1994);
+* ``"blinn-phong"``: alpha between the normal and the half vector
+  h = (wi + wo) / |wi + wo|, N = (p + 2)(p + 4) / (8 pi (2^(-p/2) + p))
+  (Blinn, SIGGRAPH 1977; Giesen, "The Blinn-Phong Normalization Zoo", 2009).
+
+The derivations are in :mod:`tracer.phong`. ``ambient`` is the lecture's
+constant ambient term (lecture 2, "Ambient term": "the cheapest of all
+hacks"), added at every hit as light arriving through the diffuse part;
+Mitsuba has none, so a scene declares it tracer-only. Mitsuba's counterpart
+is the ``whitted_phong`` BSDF written in ``reference/materials/phong.py``.
 """
 
 from __future__ import annotations

@@ -1,12 +1,19 @@
 """``type = "thindielectric"``: a thin sheet of glass (Mitsuba 3's ``thindielectric``).
 
 A sheet so thin that a ray leaves it where it entered: reflection by the law
-of reflection with the slab's reflectance R' = 2R / (1 + R) summed over all
-inner reflections (:func:`tracer.fresnel.thin_slab_reflectance`, R the exact
-Fresnel reflectance of one face), and the rest, 1 - R', passing straight
-through without bending (no scattering event: the letter "" in light-path
-expressions, Mitsuba's null lobe). ``ior`` and ``ext_ior`` may be Mitsuba's
-names (``"bk7"``).
+of reflection with the slab's reflectance
+
+    R' = R + T^2 R (1 + R^2 + R^4 + ...) = R + T^2 R / (1 - R^2) = 2R / (1 + R),
+
+T = 1 - R, summed over all inner reflections
+(:func:`tracer.fresnel.thin_slab_reflectance`, R the exact Fresnel reflectance
+of one face: lecture 1, "The Fresnel equation"), and the rest,
+1 - R' = (1 - R) / (1 + R), passing straight through without bending (no
+scattering event: the letter "" in light-path expressions, Mitsuba's null
+lobe). Sources: pbrt-v4, section 9.5 (``ThinDielectricBxDF``, the same
+geometric series); Mitsuba 3's plugin reference, ``thindielectric``, its
+counterpart (``reference/materials/thindielectric.py``). ``ior`` and
+``ext_ior`` may be Mitsuba's names (``"bk7"``).
 """
 
 from __future__ import annotations
