@@ -1,140 +1,31 @@
 """Compare the tracer's image with Mitsuba's: metrics, verdicts, a heat map.
 
-References
-----------
-Mitsuba's side of a comparison comes from one of three references
-(``reference``):
+:func:`compare_scene` renders a scene with the tracer and with one of three
+Mitsuba references (``reference``): ``deterministic`` (the default; Mitsuba's
+plugins along the whole Whitted ray tree, nothing random), ``onelobe`` (the
+``whitted`` integrator: one lobe and light sample per sample, from its own
+stream) or ``direct`` (Mitsuba's stock integrator). :func:`judge` then gives
+the verdict of one of three tests (:func:`choose_test`):
 
-``deterministic`` (the default; :mod:`reference.renderers.mitsuba.deterministic`). Mitsuba's
-plugins evaluated along the whole Whitted ray tree: both lobes of every
-delta BSDF, each with the weight Mitsuba's plugin gives it, and every area
-light sampled at the tracer's own light-sample points. Nothing is random on
-either side, so every scene, mirrors, glass and area lights included, is
-judged at float precision by ``exact-strata`` (or ``tessellated``).
+* ``exact-strata``: float precision (median, pixels beyond 1e-3 with edge ties
+  counted apart, the image mean over the pixels within 1e-3);
+* ``tessellated``: looser limits (median, pixels beyond 5 %, the mean over all
+  pixels), for a paraboloid that Mitsuba sees as a mesh;
+* ``z-test``: the statistical verdict for a reference that samples, rules 1
+  (each pixel-channel, Student's t), 2 (zero variance), 3 (4 x 4 blocks) and 4
+  (signed sums over regions);
 
-``onelobe`` (the ``whitted`` integrator of :mod:`reference.renderers.mitsuba.onelobe`).
-One lobe per sample and light samples from its own stream, as Mitsuba's own
-integrators sample: an independent opinion, which also checks that the
-tracer's light samples are unbiased. Where it samples (mirrors and glass,
-area lights) its image is noisy and judged by ``z-test``, the statistical
-verdict below. :func:`compare_scene` runs it beside the deterministic
-reference as a second opinion on scenes with area lights.
+and, on scenes whose lights the tracer samples, a second opinion by the z-test
+against the one-lobe reference.
 
-``direct``: Mitsuba's stock ``direct`` integrator, for scenes without mirrors,
-glass or area lights (it picks one light per sample; see the tests).
-
-exact-strata: the float-precision verdict
------------------------------------------
-Both sides evaluate the same ray tree at the same strata centres, so they
-differ only by float32 rounding, and where a sample lies within rounding
-distance of an edge. Three checks:
-
-* median per-pixel relative difference < 1e-5 (``median_rel``). Float32
-  rounds each operation by at most u = 2^-24 = 6e-8 relative. The two sides
-  compute the same quantities by different but equivalent formulas (camera
-  transform, intersection, Fresnel, warps), so a sample's value differs by a
-  few u per operation; even errors adding up linearly over 160 operations
-  stay within 160 u = 1e-5, and the mean of spp samples does no worse.
-  (Measured: medians of 0 to 8e-8 on every built-in scene.)
-* at most 0.1 % of pixels beyond 1e-3 (``frac_over_01pct``). 1e-3 is 100
-  times the rounding bound: a pixel gets there only when one of its samples
-  takes another path, that is, lands within rounding distance delta of an
-  edge (a silhouette or a shadow boundary, directly or through mirrors and
-  glass) and the sides round it to different sides. That happens to a
-  fraction of about f_edge x spp x delta of the pixels, with f_edge ~ 5-10 %
-  of the pixels on an edge at the built-in sizes and delta ~ 1e-6 to 1e-5
-  pixels where intersections are well conditioned (a few ulps of the scene's
-  coordinates over a pixel's footprint): 3e-6 to 6e-5 at 64 spp. Shadow rays
-  tangent to a sphere (whose discriminant cancels) and refraction (which
-  magnifies a ray's error) widen delta. The limit is the accuracy target,
-  99.9 % of the pixels within 1e-3. (Measured: 0 to 0.08 % of the pixels,
-  the tessellated scene aside.)
-* image means within 1e-4 (``mean_rel_diff``): rounding moves the mean by at
-  most the 1e-5 above; a flipped sample moves the image sum by at most the
-  edge's contrast / spp, with either sign, so 0.1 % of 19,200 pixels
-  flipping one sample each move the mean by about sqrt(19) x contrast /
-  (spp x 19,200 x mean) ~ 1e-6. What the check adds: a bias between 1e-5 and
-  1e-3 confined to fewer than half the pixels (a 5e-4 error over 30 % of
-  them moves the mean by 1.5e-4), which the first two checks let through.
-
-``tessellated``: the same for scenes with a paraboloid, which Mitsuba only
-sees as a fine mesh (limits below, from the tessellation's chord deviation).
-
-z-test: the statistical verdict
--------------------------------
-For a reference that samples (``onelobe``), and for the tracer's own image
-where it samples area lights on its own stream (then the mean of
-``TRACER_SEEDS`` seeds). The reference pools ``ZTEST_SAMPLES`` = 1024
-samples per pixel, ceil(1024 / spp) passes at the same strata with
-independent random choices. Four rules; each states its false-alarm rate
-(alpha: the probability that a correct tracer fails it) and its power (what
-it sees), and ``tests/test_statistics.py`` measures both on seeds.
-
-1. Per pixel and channel: z = |t - r| / sqrt(Var_r + Var_t + (1e-4 max(|r|, |t|))^2),
-   Var from each side's per-sample second moment (E[x^2] - E[x]^2) / N, which
-   bounds the variance of a stratified mean from above (it includes the
-   variation of radiance across the pixel). Two-sided p-values against the
-   Sidak level alpha_pixel = 1 - 0.99^(1 / pixels); at least 99.75 % of the
-   pixel-channels must pass, as in Mitsuba's own render tests. Alpha: each
-   pixel-channel fails with probability <= alpha_pixel, so failing 0.25 % of
-   them by chance is out of reach (0.03 failures expected, 144 needed at
-   160 x 120). Power: local errors beyond about 5.3 sigma on more than 0.25 %
-   of the pixel-channels; blind to a small bias spread over many pixels.
-2. Zero variance. Where the reference made random choices (its ``random``
-   AOV) but every one of its samples gave the same value, its variance
-   estimate is zero and says nothing: a path of probability p is missed by
-   all N samples with probability (1 - p)^N <= exp(-p N), so at the pixel's
-   Sidak level the missed paths have probability p < q = -ln(alpha_pixel) / N
-   (the "rule of three", 3 / N, at 95 %). A sample's value is bounded by B,
-   the brightest value of the reference image in that channel (a missed path
-   ends at an emitter or a Lambertian surface, whose radiance does not depend
-   on the direction it is seen from, and the specular weights along a camera
-   path are <= 1: the (n_i / n_t)^2 > 1 of leaving glass follows its
-   reciprocal on entering), so the
-   pixel's expectation lies within q B of the reference's value: such a
-   pixel passes when |t - r| <= q B (plus the tracer's own noise). Alpha:
-   alpha_pixel per pixel, as rule 1. Power: errors beyond q B (1.4 % of the
-   brightest pixel at N = 1024 and 19,200 pixels) at those pixels only.
-3. 4 x 4 blocks (``block_median_rel`` < 1 %, ``block_frac_over_5pct`` < 2 %
-   of blocks beyond 5 % and 3 sigma of the noise): a coarse look at the
-   picture; not a statistical level of its own.
-4. Regions (``region_max_z``): the signed sum of the differences (the channel
-   sum R + G + B) over each region, D_g = sum (t - r), divided by its standard
-   deviation, Z_g = D_g / sqrt(sum Var). Regions: every material (the tracer's
-   first-hit material at the pixel's centre, from
-   :func:`tracer.integrator.material_ids`), the background, 4 x 4 tiles of the
-   image and the whole image; regions with fewer than ``REGION_MIN_PIXELS``
-   random pixels are not tested. Var is the spread of the reference's passes
-   (and of the tracer's seeds): the sample variance of independent replicates
-   is unbiased whatever the shape of the noise, per pixel with only passes - 1
-   degrees of freedom but summed over hundreds of independent pixels, and D_g
-   sums thousands of independent samples, so Z_g is standard normal under a
-   correct tracer. The sums take only pixels whose value varies on either side
-   beyond rule 1's float32 floor; the others (deterministic pixels, a light
-   that is sampled but always shadowed, a rare path no pass took, a sample on
-   an edge that the two sides round differently) are judged pixel by pixel by
-   rules 1 and 2. Leaving them out changes nothing where both sides agree on a
-   fixed value (t - r = 0); where a missed rare path makes t - r > 0 it shifts
-   the sum by well under one of those pixels' standard deviations each, and the
-   check on seeds shows none of it: the mean of Z_g^2 over disjoint tiles stays
-   within its chi-square interval (0.78 to 1.01 over 24 seeds on four glass and
-   area-lit scenes, ``docs/verdict_figures.py``; slightly below 1 where rare
-   paths make the noise skewed, for then a large D_g comes with a large
-   estimated variance: conservative). Every |Z_g| must stay below the Sidak
-   level z_crit for alpha = ``REGION_ALPHA`` = 1e-3 over the G regions tested
-   (z_crit ~ 4.0 for 20-25 regions). Alpha: 1e-3 per scene. Power: a relative
-   bias b over a region is detected with probability >= 90 % when b |sum r| >=
-   (z_crit + 1.28) sqrt(sum Var); each region's smallest such b is reported
-   (``detectable_bias``): at 96 x 72 and 1024 samples, 0.06 % (area_lights'
-   whole image) to 0.28 % (the glass of emitter_in_glass), and a 1 % bias over
-   the glass or the image was caught in 96 of 96 trials (0 of 96 with the
-   variance 1024 times too large). A sum of z^2 (chi-square) would also see
-   errors of alternating sign, but squares lose the sign that makes a 1 % bias
-   over thousands of pixels visible, and with 15 degrees of freedom per pixel
-   its null distribution depends on the shape of each pixel's noise; the signed
-   sums do not.
-
-A scene fails the z-test when rule 1 (with rule 2), 3 or 4 fails.
+Every rule, its limits, their derivation, its false-alarm rate and power, and
+the figures measured on it are in docs/verdicts.md, one section a test: "The
+references", "Which test judges a scene", "exact-strata" ("The median",
+"Pixels beyond 1e-3, edge ties apart", "The image mean"), "tessellated",
+"z-test" ("What the two sides give", "Rule 1" to "Rule 4", "Measured on the
+built-in scenes"), "The second opinion", and "Calibration on real scenes:
+false alarms" (benchmarks/false_alarms.py). The docstrings below state each
+rule in a line and name its section.
 """
 
 from __future__ import annotations
@@ -150,13 +41,10 @@ import numpy as np
 #: Relative floor on the compared values' standard deviation (float32 agreement).
 FLOAT_SIGMA = 1e-4
 
-#: The float-precision verdict (derived in the module docstring).
+#: exact-strata's limits (docs/verdicts.md, "exact-strata").
 EXACT_LIMITS = {"median_rel": 1e-5, "frac_over_01pct": 1e-3, "mean_rel_diff": 1e-4}
-#: Deterministic scenes with a shape Mitsuba lacks (a paraboloid), which the conversion
-#: tessellates so that its chords stay within 1e-4 of the shape's size: positions then
-#: differ by up to 1e-4 relative and interpolated normals by about (pi / N)^2 / 8 for N
-#: segments, so shading differs by up to ~1e-3 relative where the shape is seen, and
-#: samples within 1e-4 of its silhouette may land on either side.
+#: tessellated's limits, for a paraboloid Mitsuba sees as a mesh with chords within 1e-4
+#: (docs/verdicts.md, "tessellated").
 TESSELLATED_LIMITS = {"median_rel": 1e-3, "frac_over_5pct": 0.02, "mean_rel_diff": 5e-3}
 ZTEST_ALPHA = 0.01
 ZTEST_PASS_FRACTION = 0.9975
@@ -314,9 +202,9 @@ def zero_variance_bound(ref: np.ndarray, random_fraction: np.ndarray, samples: i
                         alpha_pixel: float) -> np.ndarray:
     """H x W x 3: how far a correct pixel may lie from a reference with zero variance (rule 2).
 
-    q B with q = -ln(alpha_pixel) / N_random (the probability of the paths all N
-    random samples missed, at the pixel's level) and B the brightest reference
-    value of the channel; infinite where the reference made no random choice.
+    q B, q = -ln(alpha_pixel) / N_random and B the channel's brightest reference
+    value; 0 where the reference made no random choice (docs/verdicts.md,
+    "Rule 2: zero variance").
     """
     n = np.asarray(random_fraction, dtype=np.float64) * samples
     with np.errstate(divide="ignore"):
@@ -383,12 +271,9 @@ def student_t_quantile(p: float, dof: float) -> float:
 def welch_dof(ref_var: np.ndarray, ref_replicates: int | None, test_var, test_replicates):
     """Rule 1's degrees of freedom per pixel-channel (Welch-Satterthwaite).
 
-    Each side's variance of its mean is known only as well as its independent
-    replicates allow (the reference's passes, the tracer's seeds: the samples of
-    one pass sit at the same strata, so it is the passes that are independent),
-    nu_side = replicates - 1; the sum of the two variances then has
-    nu = (V_r + V_t)^2 / (V_r^2 / nu_r + V_t^2 / nu_t). Infinite (the normal limit)
-    where a side's replicates are unknown and that side's variance dominates.
+    nu = (V_r + V_t)^2 / (V_r^2 / nu_r + V_t^2 / nu_t), nu_side = replicates - 1
+    (passes, seeds), a side with unknown replicates infinite (docs/verdicts.md,
+    "Rule 1: each pixel-channel").
     """
     vr = np.asarray(ref_var, dtype=np.float64)
     vt = np.zeros_like(vr) if test_var is None else np.asarray(test_var, dtype=np.float64)
@@ -410,8 +295,9 @@ def z_test(test: np.ndarray, ref: np.ndarray, ref_var: np.ndarray,
     pixel-channels where the reference made random choices but estimated zero
     variance are judged by the zero-variance rule instead. With
     ``ref_replicates`` / ``test_replicates`` (passes, seeds) the statistic is
-    referred to Student's t with Welch's degrees of freedom (:func:`welch_dof`)
-    instead of the normal: the t-like correction of rule 1.
+    referred to Student's t with Welch's degrees of freedom (:func:`welch_dof`);
+    without them, to the normal. docs/verdicts.md, "Rule 1: each pixel-channel"
+    and "Rule 2: zero variance".
     """
     t = test.astype(np.float64)
     r = ref.astype(np.float64)
@@ -448,22 +334,16 @@ def _channel_sum_variance(per_channel: np.ndarray | None) -> np.ndarray | None:
 
 
 #: A block "differs" only when its difference is also this many standard deviations of
-#: the two estimates' noise (see block_metrics).
+#: the two estimates' noise (rule 3, block_metrics).
 BLOCK_SIGMAS = 3.0
 
 
 def block_metrics(test: np.ndarray, ref: np.ndarray, var: np.ndarray | None = None) -> dict:
-    """Median relative difference of 4x4 blocks, and the fraction of blocks beyond 5 %.
+    """Rule 3: median relative difference of 4x4 blocks, and the fraction beyond 5 %.
 
-    With ``var`` (the per-pixel, per-channel variance of test - ref), a block
-    counts as beyond 5 % only if its difference also exceeds BLOCK_SIGMAS
-    standard deviations of that noise: in blocks far darker than the image
-    (say 1 % of its mean) a 1024-sample reference still carries several per
-    cent of relative noise, and a relative threshold alone would then measure
-    the reference, not the renderers. The difference is summed over the
-    channels, whose noise is correlated (one path carries all three), so its
-    variance is bounded by (sd_R + sd_G + sd_B)^2 (Cauchy-Schwarz), up to three
-    times the sum of the channels' variances for a grey pixel.
+    With ``var`` (the per-pixel, per-channel variance of test - ref) both look
+    only at what exceeds BLOCK_SIGMAS standard deviations of the block's noise
+    (docs/verdicts.md, "Rule 3: 4 x 4 blocks").
     """
     bt, br = block_mean(test), block_mean(ref)
     rel = pixel_relative_difference(bt, br)
@@ -474,15 +354,8 @@ def block_metrics(test: np.ndarray, ref: np.ndarray, var: np.ndarray | None = No
         sigma_block = np.sqrt(block_mean(v)[..., 0] / block_pixels(v))  # Var of a mean
         diff = np.abs(bt.astype(np.float64) - br).sum(-1)
         beyond &= diff > BLOCK_SIGMAS * sigma_block
-        # The median judges the relative difference beyond BLOCK_SIGMAS of the block's
-        # noise (issue 28): at 16 spp a 1024-sample reference and a 256-sample tracer
-        # carry a few per cent of relative noise in dim blocks, and the median of the
-        # plain relative difference then measured the noise (2.2 to 2.5 % on an area-lit
-        # plastic scene, a correct tracer). Under a correct tracer a block exceeds 3
-        # sigma with probability 0.27 % (normal: a block pools 16 pixels x >= 256
-        # samples), so the median, which needs half the blocks, is 0 but with
-        # probability below 1e-100; a relative bias b over more than half the blocks
-        # still fails it once b > 1 % + 3 sigma_block / |r_block|.
+        # the median takes the relative difference beyond BLOCK_SIGMAS of the noise, so
+        # that dim blocks' noise is not measured as a difference (issue 28)
         excess = np.maximum(diff - BLOCK_SIGMAS * sigma_block, 0.0)
         median_rel = np.where(diff > 0, rel * excess / np.where(diff > 0, diff, 1.0), 0.0)
     return {"block_median_rel": float(np.median(median_rel)),
@@ -529,7 +402,8 @@ class RegionTest:
 
 def region_test(test: np.ndarray, ref: np.ndarray, noise: Noise,
                 alpha: float = REGION_ALPHA) -> RegionTest:
-    """Signed sums of the differences over regions against their noise (rule 4)."""
+    """Rule 4: signed sums of the differences over regions against their noise, every |Z|
+    below the Sidak level of ``alpha`` (docs/verdicts.md, "Rule 4: regions")."""
     d = (test.astype(np.float64) - ref).sum(-1)
     v_ref = noise.ref_pass_var
     if v_ref is None:
@@ -539,10 +413,8 @@ def region_test(test: np.ndarray, ref: np.ndarray, noise: Noise,
     if v_tr is None:
         v_tr = _channel_sum_variance(noise.tracer_var)
     v_tr = np.zeros_like(v_ref) if v_tr is None else np.asarray(v_tr, dtype=np.float64)
-    # Only pixels whose value varies, on either side, beyond rule 1's float32 floor. The
-    # others (deterministic, a light sampled but always shadowed, a rare path that no
-    # pass took, a sample on an edge that the two sides round differently) are judged
-    # pixel by pixel by rules 1 and 2.
+    # only pixels whose value varies beyond rule 1's float32 floor on either side; the
+    # others are rules 1 and 2's (docs/verdicts.md, "Rule 4: regions")
     floor = (FLOAT_SIGMA * np.abs(ref.astype(np.float64)).sum(-1)) ** 2
     random = (v_ref > floor) | (v_tr > floor)
     var = v_ref + v_tr + floor
@@ -565,7 +437,8 @@ def region_test(test: np.ndarray, ref: np.ndarray, noise: Noise,
     return RegionTest(alpha_region, z_crit, worst, worst < z_crit, tested)
 
 
-#: Smallest 3 x 3 contrast, relative to the pixel, that counts as an edge (exact_checks).
+#: Smallest 3 x 3 contrast, relative to the pixel, that counts as an edge (exact_checks;
+#: docs/verdicts.md, "Pixels beyond 1e-3, edge ties apart").
 EDGE_CONTRAST = 0.1
 
 
@@ -580,34 +453,22 @@ def local_range(ref: np.ndarray) -> np.ndarray:
 
 
 def exact_checks(test: np.ndarray, ref: np.ndarray) -> dict:
-    """exact-strata's pixel and mean checks with edge ties counted apart (issue 28).
+    """exact-strata's pixel and mean checks, edge ties counted apart (issue 28).
 
-    * ``frac_over_01pct``: pixels beyond 1e-3 that are not edge ties. A pixel is an
-      edge tie when its difference, summed over the channels, is at most the
-      reference's range over its 3 x 3 neighbourhood, R_p: where a straight edge
-      (two surfaces meeting, a silhouette, a shadow boundary) passes exactly through
-      sample positions, each side may put those samples on either surface, both
-      valid to float rounding. A flipped sample changes the pixel by (L_A - L_B) /
-      spp, the two surfaces' radiances are what the pixels on either side of the
-      edge show, so |L_A - L_B| <~ R_p, and a straight line meets at most n of the n
-      x n strata: |t - r| <= n R_p / spp = R_p / n <= R_p. Ties are capped by the
-      edges' length: a straight line crosses at most W + H - 1 pixels, so more than
-      ``W + H - 1`` tie pixels (one edge across the whole image, or the two floor-wall
-      edges of a Cornell box, about 35 pixels at 128 x 128) count as differences again.
-    * ``mean_rel_diff``: the image means over the pixels within 1e-3 (those beyond
-      are rule 2's, which allows 0.1 % of them with any difference: two such pixels of
-      a 48 x 48 image moved the whole mean by 2e-4), relative to the reference's mean
-      over all pixels: |sum_in (t - r)| / sum r. What the check is for, a bias between
-      1e-5 and 1e-3 over many pixels, lies within 1e-3 and so stays in the sum.
+    * ``frac_over_01pct``: the fraction of pixels beyond 1e-3 that are not edge
+      ties (3 x 3 contrast R_p >= EDGE_CONTRAST of the pixel, difference <= R_p); when
+      there are more than W + H - 1 ties, every pixel beyond 1e-3 counts.
+    * ``mean_rel_diff``: |sum (t - r)| over the pixels within 1e-3, over sum |r| of
+      the whole image.
+
+    docs/verdicts.md, "Pixels beyond 1e-3, edge ties apart" and "The image mean".
     """
     rel = pixel_relative_difference(test, ref)
     beyond = rel > 1e-3
     d = np.abs(test.astype(np.float64) - ref).sum(-1)
     rng_ = local_range(ref)
     level = np.abs(ref.astype(np.float64)).sum(-1)
-    # an edge is a discontinuity: 3 x 3 contrast >= EDGE_CONTRAST of the pixel's value
-    # (smooth shading changes far less over 3 pixels), and a tie moves the pixel by at
-    # most that contrast
+    # an edge is a discontinuity, and a tie moves the pixel by at most its contrast
     tie = beyond & (rng_ >= EDGE_CONTRAST * level) & (d <= rng_)
     h, w = rel.shape
     cap = w + h - 1
@@ -634,7 +495,7 @@ def choose_test(scene, reference: str = "deterministic") -> str:
     """``exact-strata`` or ``tessellated`` where neither side samples, else ``z-test``.
 
     The deterministic reference never samples; the others do wherever the scene
-    has mirrors, glass or area lights.
+    has mirrors, glass or area lights (docs/verdicts.md, "Which test judges a scene").
     """
     if reference_name(reference) != "deterministic" and (
             scene.has_specular() or scene.samples_lights()):
@@ -644,6 +505,8 @@ def choose_test(scene, reference: str = "deterministic") -> str:
 
 def judge(test_name: str, metrics: Metrics, tracer_img, ref_img,
           noise: Noise | None = None) -> tuple[Verdict, ZTest | None]:
+    """The verdict of ``test_name`` on the two images, every check passing (docs/verdicts.md,
+    one section a test). ``noise``: the z-test's."""
     checks: dict[str, dict] = {}
 
     def check(name, value, limit):
@@ -829,16 +692,10 @@ class PooledTracer:
 def tracer_pooled(scene, seeds: int = TRACER_SEEDS, first_seed: int = 0) -> PooledTracer:
     """Mean of ``seeds`` tracer renders and the variance of that mean.
 
-    Where the tracer samples area lights its image is random. The statistical
-    verdict then tests its expectation, estimated by the mean of renders with
-    seeds first_seed, first_seed + 1, ... (the same strata, independent light samples: as one
-    render with seeds x spp samples). The variance of that mean comes from the
-    per-sample second moment pooled over all of them, (E[x^2] - E[x]^2) /
-    (seeds x spp), an upper bound for stratified samples (for rule 1), and
-    from the spread of the seeds' means, unbiased (for the region sums). One
-    render's spp samples alone give too noisy a variance for a
-    Sidak-corrected test (measured: 99.65 % of pixels passing on the Heckbert
-    scene, against 100 % with 16 seeds).
+    Where the tracer samples area lights the z-test judges its expectation: the
+    mean of renders with seeds first_seed, first_seed + 1, ..., with the pooled
+    per-sample variance (rule 1) and the spread of the seeds' means (rule 4)
+    (docs/verdicts.md, "What the two sides give").
     """
     from whitted.reference.shared import reused
 
@@ -984,9 +841,8 @@ def statistical_verdict(scene, ref, tracer_image: np.ndarray | None = None,
     return StatisticalResult(verdict, metrics, tracer_image, ref, noise, seeds)
 
 
-#: The second opinion renders at most this many pixels (the scene scaled down): it checks
-#: the tracer's light sampling in expectation, which its region sums see at any size,
-#: and its 1024 pooled samples per pixel would otherwise dominate a report's time.
+#: The second opinion renders at most this many pixels, the scene scaled down
+#: (docs/verdicts.md, "The second opinion").
 SECOND_OPINION_PIXELS = 160 * 120
 
 
