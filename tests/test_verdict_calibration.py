@@ -3,7 +3,7 @@
 Each case is a pair of small synthetic images built like the false alarm seen on
 real scenes (docs/verdicts.md, "Calibration"): the rules before the calibration
 failed it, the rules now pass it, and a planted error of the kind the rule is for
-still fails. The rules' derivations are in reference/verdicts/compare.py.
+still fails. The rules' derivations are in docs/verdicts.md.
 """
 
 from __future__ import annotations
@@ -133,5 +133,5 @@ def test_block_median_judges_what_noise_cannot_explain():
     old = block_metrics(t, r)                   # without the noise: the old median
     assert old["block_median_rel"] > 0.01       # the old rule's false alarm
     assert block_metrics(t, r, var)["block_median_rel"] < 0.01
-    # a 10 % bias everywhere (2 block sigmas on top of the noise) still fails
+    # a 30 % bias everywhere (well beyond the noise) still fails
     assert block_metrics(t * 1.3, r, var)["block_median_rel"] > 0.01
