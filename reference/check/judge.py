@@ -424,8 +424,9 @@ class CheckResult:
         return d
 
 
-def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p):
-    """Failing pixels under a threshold (statistical when ``fail`` is None)."""
+def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p, judged=None):
+    """Failing pixels under a threshold (statistical when ``fail`` is None); ``judged``
+    (H x W) the pixels counted, all where None."""
     a = np.abs(diff)
     if fail is None:
         over = a > z_p * np.sqrt(var) + quad
@@ -435,6 +436,9 @@ def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p):
         threshold = f"absolute {fail:g}"
     failing_px = over.any(axis=-1) | nonfinite
     n = failing_px.size
+    if judged is not None:
+        failing_px &= judged
+        n = max(int(judged.sum()), 1)
     count = int(failing_px.sum())
     limit = (FAIL_PERCENT if percent is None else percent) / 100
     finite_a = np.where(np.isfinite(a), a, 0)
@@ -446,12 +450,15 @@ def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p):
 
 def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
                 material_names: list[str] | None = None, model_variance: np.ndarray | None = None,
-                thresholds: Thresholds | None = None) -> CheckResult:
+                thresholds: Thresholds | None = None,
+                ignore: np.ndarray | None = None) -> CheckResult:
     """Judge a :class:`~reference.check.images.UserImage` against a :class:`Reference`.
 
     ``model_variance`` is the variance of the image's pixels under ``--spp N``
     (:func:`path_variance` / N); the image's own variance layer takes
-    precedence, and without either the noise is estimated locally.
+    precedence, and without either the noise is estimated locally. ``ignore``
+    (H x W) leaves pixels out of both rules (a hypothesis of
+    :mod:`reference.check.conventions` that cannot predict them).
     """
     th = thresholds or Thresholds()
     u = np.asarray(user.image, dtype=np.float64)
@@ -466,6 +473,10 @@ def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
     floor = (FLOAT_SIGMA * np.maximum(np.abs(r), np.where(np.isfinite(u), np.abs(u), 0))) ** 2
     ref_var = np.zeros_like(u) if ref.variance is None else ref.variance
     valid = ~nonfinite
+    if ignore is not None:
+        valid = valid & ~ignore
+        diff = np.where(ignore[..., None], 0.0, diff)
+        nonfinite = nonfinite & ~ignore
     if user.variance is not None:
         method = "variance"
         noise = user.variance + ref_var
@@ -500,7 +511,7 @@ def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
     z_p = NormalDist().inv_cdf(1 - alpha_pixel / 2)
     quad = np.zeros_like(u) if ref.quadrature is None else ref.quadrature
     pix, failing_px = _pixel_rule(diff, var, quad, nonfinite, th.fail, th.fail_percent,
-                                  th.hard_fail, z_p)
+                                  th.hard_fail, z_p, valid if ignore is not None else None)
     if pix.nonfinite:
         notes.append(f"{pix.nonfinite:,} pixels are NaN or infinite: they fail")
     warning = None
@@ -694,14 +705,29 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
         say("splitting the difference by light path and material")
         run.decomposition = decomposition(scene, result, ids, names, seed)
     if suspects and not result.passed:
-        from whitted.reference.check.suspects import rank_catalog
+        from whitted.reference.check.suspects import name_cause, rank_catalog
 
         say("ranking the catalog's formula bugs by how much of the difference each explains")
         a = result.arrays
-        run.suspects = rank_catalog(scene, a["diff"], a["var"], a["valid"], seed,
-                                    log=log).to_json()
+        t0 = time.perf_counter()
+        ranking = rank_catalog(scene, a["diff"], a["var"], a["valid"], seed, log=log)
+        say("judging the conventions and the bugs: which leaves only noise")
+        run.suspects = ranking.to_json() | name_cause(
+            user, reference, result, ids, names, ranking,
+            lambda: fine_image(scene, reference, seed))
+        run.suspects["seconds"] = time.perf_counter() - t0
     run.seconds = time.perf_counter() - start
     return run
+
+
+def fine_image(scene, reference: Reference, seed: int = 0) -> np.ndarray:
+    """The tracer's image at twice the film's size (half-pixel shifts: conventions.py), cached
+    with the bugs' images; at one seed where lights are sampled."""
+    from whitted.reference.check.suspects import mutated_image
+
+    w, h = scene.film.width, scene.film.height
+    return mutated_image(scene.with_overrides(size=(2 * w, 2 * h)), None, seed)[0].astype(
+        np.float64)
 
 
 def rank_suspects(user_image: np.ndarray, scene, candidates: list,
@@ -764,12 +790,14 @@ def format_run(run: CheckRun, title: str) -> str:
         out.append(format_decomposition([PathFit(**p) for p in d["light_paths"]],
                                         [MaterialPart(**m) for m in d["materials"]]))
     if run.suspects is not None:
-        from whitted.reference.check.suspects import SuspectFit, format_suspects
+        from whitted.reference.check.suspects import format_cause
 
         sp = run.suspects
-        out.append(format_suspects([SuspectFit(**f) for f in sp["top"]]) +
+        bugs = sum(f["kind"] == "formula bug" for f in sp["ranked"])
+        out.append(format_cause(sp) +
                    f"\n  ({sp['candidates']} bugs of the catalog reach the scene, "
-                   f"{len(sp['ranked'])} change its image; {sp['seconds']:.1f} s)")
+                   f"{bugs} change its image; {len(sp['ranked']) - bugs} conventions tried; "
+                   f"{sp['seconds']:.1f} s)")
     verdict = "PASS" if run.passed else "FAIL"
     if run.passed and run.warned:
         verdict = "PASS with a WARNING"
@@ -853,13 +881,38 @@ def write_outputs(run: CheckRun, outdir, title: str, final=None) -> dict:
                                         "the reference", label="|image - reference| / reference")
         side_by_side(a["image"], a["reference"], a["failing"], out / "side_by_side.png")
         write_exr(out / "reference.exr", a["reference"])
+        curve = None
+        if run.suspects is not None and run.suspects.get("curve"):
+            write_curve(run, out / "curve.png")
+            run.files["curve.png"] = str(Path(final or out) / "curve.png")
+            curve = (out / "curve.png").read_bytes()
         write_json(out / "check.json", run.to_json())
-        (out / "check.html").write_text(check_page(run, title, (out / "diff.png").read_bytes()))
+        (out / "check.html").write_text(check_page(run, title, (out / "diff.png").read_bytes(),
+                                                   curve))
     except OSError as e:
         raise UserError(f"{final or out}: cannot write: {e.strerror or e}") from None
     except UserError as e:   # tracer.imageio's, naming the staging folder
         raise UserError(str(e).replace(str(out), str(final or out))) from None
     return run.files
+
+
+def write_curve(run: CheckRun, path) -> None:
+    """curve.png: the image's values against the reference's, the fitted monotone curve and
+    the named curve (:func:`reference.check.conventions.plot_curve`)."""
+    from whitted.reference.check import conventions as cv
+
+    c = run.suspects["curve"]
+    enc = cv.FileEncoding(c["encoding"], c["maxval"], c["clip"])
+    fit = cv.MonotoneFit([np.asarray(x) for x in c["x"]], [np.asarray(y) for y in c["y"]],
+                         c["pieces"])
+    named = None
+    first = run.suspects["ranked"][0] if run.suspects["ranked"] else None
+    if run.suspects.get("named") and first and first["kind"] == "convention" and \
+            first["id"] != cv.MONOTONE.id and cv.get(first["id"]).write is not None:
+        conv = cv.get(first["id"])
+        named = cv.Prediction(conv, np.zeros(0), None, None, None, params=first["params"])
+    a = run.result.arrays
+    cv.plot_curve(fit, enc, path, named, (a["reference"], a["image"]))
 
 
 def _verdict_html(ok: bool, warn: bool = False) -> str:
@@ -897,7 +950,8 @@ def result_rows(result: CheckResult) -> str:
             f"{g['limit']:.2f}{detail}</td><td>{_verdict_html(g['passed'])}</td></tr>")
 
 
-def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
+def check_page(run: CheckRun, title: str, heat_png: bytes, curve_png: bytes | None = None
+               ) -> str:
     """One self-contained HTML page: the verdict, the tables, and the tev-like viewer."""
     import base64
     import html
@@ -943,22 +997,39 @@ def check_page(run: CheckRun, title: str, heat_png: bytes) -> str:
                      f"<th>share of the difference</th><th>bias</th></tr>{mats}</table>")
     if run.suspects is not None:
         sp = run.suspects
+        parts.append(f"<h2>Cause</h2><p><b>{esc(sp.get('cause', ''))}</b></p>")
+        if curve_png is not None:
+            import base64 as b64m
+
+            parts.append("<p class='meta'>Your values against the reference's, per channel, "
+                         "the monotone curve fitted through them"
+                         + (" (it explains the difference down to the noise)"
+                            if sp["curve"].get("at_noise") else
+                            " (it does not explain the difference: the light transport "
+                            "differs)")
+                         + ":</p><p><img alt='fitted curve' src='data:image/png;base64,"
+                         + b64m.b64encode(curve_png).decode("ascii") + "'></p>")
         rows = "".join(f"<tr><td>{i}</td><td><code>{esc(f['id'])}</code>"
                        + (f" (not told apart from {esc(', '.join(f['ties']))})"
                           if f["ties"] else "")
                        + (f" (same pattern, other strength: {esc(', '.join(f['alike']))})"
                           if f["alike"] else "")
-                       + f"</td><td>{esc(f['formula'])}</td><td>{esc(f['correct'])}</td>"
-                       f"<td>{esc(f['topic'])}</td><td>{100 * f['explains']:.0f} %</td>"
+                       + f"</td><td>{esc(f['kind'])}</td>"
+                       f"<td>{esc(f['formula'])}</td><td>{esc(f['correct'])}</td>"
+                       f"<td>{esc(f['topic'])}" + (f"<br>{esc(f['source'])}" if f["source"]
+                                                     else "") + "</td>"
+                       f"<td>{100 * f['explains']:.0f} %</td>"
+                       f"<td>{'yes' if f['at_noise'] else 'no'}</td>"
                        f"<td>{f['scale']:.2f}</td></tr>" for i, f in enumerate(sp["top"], 1))
-        parts.append("<h2>Suspects</h2><p class='meta'>The catalog's formula bugs "
-                     f"(whitted mutants --list) that reach the scene ({sp['candidates']}; "
-                     f"{len(sp['ranked'])} change its image), ranked by the share of the "
-                     "difference that the bug's image explains (R<sup>2</sup> of a least-squares "
-                     "fit weighted by the noise; strength 1: exactly that bug).</p>"
-                     "<table><tr><th>rank</th><th>bug</th><th>formula</th><th>right</th>"
-                     "<th>lecture topic</th><th>explains</th><th>strength</th></tr>"
-                     f"{rows}</table>")
+        parts.append("<h2>Suspects</h2><p class='meta'>The ways of writing a right image "
+                     "wrongly (conventions) and the catalog's formula bugs "
+                     f"(whitted mutants --list) that reach the scene ({sp['candidates']}), "
+                     "each judged by what it leaves: first the one whose residual is at the "
+                     "noise with the smallest score (none: no cause is named), then by the "
+                     "share of the whole difference it explains.</p>"
+                     "<table><tr><th>rank</th><th>suspect</th><th>kind</th><th>formula</th>"
+                     "<th>right</th><th>topic / source</th><th>explains</th><th>at the "
+                     f"noise</th><th>strength</th></tr>{rows}</table>")
     parts.append("<h2>The images</h2>")
     parts.append(viewer([("your image", a["image"]), ("reference", a["reference"])],
                         "the difference view outlines the pixels beyond the threshold in cyan",

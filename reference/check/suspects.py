@@ -242,6 +242,20 @@ class SuspectFit:
     #: the same explained sum of squares over the part of sum w D^2 beyond its expectation
     #: under noise alone, at most 1
     beyond_noise: float = 0.0
+    #: "formula bug" (the catalog, :mod:`reference.mutants`) or "convention" (how the
+    #: image was written, :mod:`reference.check.conventions`)
+    kind: str = "formula bug"
+    #: where the right formula comes from (a convention's standard)
+    source: str = ""
+    #: what is left once this suspect is put into the reference passes the check's own rules
+    #: (the residual is at the noise: :func:`name_cause`)
+    at_noise: bool = False
+    #: sum of the residual's squares over the noise's variance (common to all suspects),
+    #: plus twice the fitted parameters; the lowest at the noise is the cause
+    score: float | None = None
+    #: a convention's class ("transfer curve", "channel order", ...), its fitted parameters
+    family: str = ""
+    params: dict = field(default_factory=dict)
     #: other suspects this image cannot tell from this one: their image with their bug is
     #: the same bit for bit on the pixels judged, or the same pattern (:data:`ALIKE`) at a
     #: strength that agrees with this one's within 3 standard errors
@@ -461,6 +475,9 @@ class SuspectRanking:
     #: every bug that changes the image, best first
     ranked: list[SuspectFit]
     seconds: float
+    #: id -> the bug's image, and the tracer as written at the same seed (not in JSON)
+    images: dict = field(default_factory=dict, repr=False)
+    base: np.ndarray | None = field(default=None, repr=False)
 
     @property
     def top(self) -> list[SuspectFit]:
@@ -511,7 +528,9 @@ def rank_catalog(scene, diff: np.ndarray, var: np.ndarray, use: np.ndarray | Non
     ranked = rank_difference(diff, var, use, cands, images, base)
     ranked_ids = {f.id for f in ranked}
     return SuspectRanking(len(entries), cached, [c.id for c in cands if c.id not in ranked_ids],
-                          ranked, time.perf_counter() - start)
+                          ranked, time.perf_counter() - start,
+                          {c.id: m for c, m in zip(cands, images, strict=True)
+                           if c.id in ranked_ids}, base)
 
 
 def format_suspects(fits: list[SuspectFit], top: int = TOP) -> str:
@@ -526,6 +545,232 @@ def format_suspects(fits: list[SuspectFit], top: int = TOP) -> str:
         lines.append(f"       formula: {f.formula}")
         if f.correct:
             lines.append(f"       right:   {f.correct}")
+    if not fits:
+        lines.append("  none: no bug of the catalog that the scene reaches changes its image")
+    return "\n".join(lines)
+
+
+# ------------------------------------------------- naming a cause, or saying there is none
+
+#: Suspects judged with the check's own rules after a first, cheap ranking (by the residual's
+#: squares over the failing check's noise); the monotone curve is always judged.
+JUDGED = 8
+#: Two suspects at the noise whose predictions differ by less than this sum of squares over
+#: the noise's variance are ties: a 6-sigma difference in all, so that the image picks the
+#: wrong one of two by chance with probability Phi(-3) = 0.13 % (their scores' difference
+#: has mean S and standard deviation 2 sqrt(S) under the right one).
+TIE_SCORE = 36.0
+
+
+@dataclass
+class _Hypothesis:
+    fit: SuspectFit
+    image: np.ndarray
+    reference: object             # judge.Reference: the prediction with its noise terms
+    unknown: np.ndarray | None = None
+    parameters: int = 0
+    prediction: object = None     # conventions.Prediction
+
+
+def _difference_beyond_noise(x: np.ndarray, sd: np.ndarray, use: np.ndarray) -> float:
+    """sum of |x| - sd where positive, over the judged values (the light beyond the noise)."""
+    return float(np.where(use[..., None], np.maximum(np.abs(x) - sd, 0), 0).sum())
+
+
+def name_cause(user, ref, result, material_ids=None, material_names=None,
+               ranking: SuspectRanking | None = None, fine: Callable | None = None,
+               log: Callable[[str], None] | None = None) -> dict:
+    """Name what makes a failing image differ, or say that nothing known does.
+
+    The hypotheses: each convention of :mod:`reference.check.conventions`
+    (the image right, written wrongly), each formula bug of ``ranking`` (its
+    image at strength 1: the reference plus the bug's M - R), and any monotone
+    curve per channel (:func:`~reference.check.conventions.monotone_fit`). Each
+    predicts the image a renderer makes under it; the residual image -
+    prediction is judged by the check's own rules (:func:`~reference.check.judge.
+    judge_image`, the noise estimated again from the residual; the
+    :data:`JUDGED` most likely after a cheap first ranking). A suspect is named
+    only when its residual passes (it explains the difference down to the
+    noise) and it has the lowest score of those that pass (the residual's
+    squares over the noise, the smallest variance any judgement found per
+    value, plus twice its fitted parameters), which makes it beat every
+    convention, every other bug and a generic curve; suspects at the noise
+    whose predictions differ by less than :data:`TIE_SCORE` are ties.
+    Otherwise no cause is named. ``explains`` is a share of the whole
+    difference: 1 - B(image - prediction) / B(image - reference), with B the
+    light beyond one standard deviation of noise summed over every value (so
+    no region dominates by its brightness squared).
+    """
+    from whitted.reference.check import conventions as cv
+    from whitted.reference.check.judge import Reference, judge_image
+
+    a = result.arrays
+    u, r = a["image"], a["reference"]
+    valid = a["valid"]
+    var0 = a["var"]
+    w0 = np.where(valid[..., None], 1 / np.maximum(var0, 1e-300), 0.0)
+    enc = cv.file_encoding(user)
+    hyps: list[_Hypothesis] = []
+    for c in cv.CONVENTIONS:
+        p = cv.predict(c, enc, ref, u, w0, valid, fine)
+        if p is None:
+            continue
+        fit = SuspectFit(c.id, p.formula, c.kind, 0.0, float(p.params.get("s", 1.0)), 0.0,
+                         p.correct, kind="convention", source=c.source, family=c.kind,
+                         params=p.params)
+        hyps.append(_Hypothesis(fit, p.image, Reference(p.image, p.variance, ref.name,
+                                                        ref.seeds, p.spread, p.quadrature),
+                                p.unknown, c.parameters, p))
+    mono_img, mono = cv.monotone_fit(u, r, w0, valid)
+    if user.clip is not None:
+        mono_img = np.minimum(mono_img, user.clip)
+    m = cv.MONOTONE
+    mfit = SuspectFit(m.id, m.formula(enc), m.kind, 0.0, 1.0, 0.0, m.correct(enc),
+                      kind="convention", source=m.source, family=m.kind)
+    mono_h = _Hypothesis(mfit, mono_img, Reference(mono_img, ref.variance, ref.name, ref.seeds,
+                                                   ref.spread, ref.quadrature),
+                         None, mono.pieces)
+    hyps.append(mono_h)
+    if ranking is not None and ranking.base is not None:
+        base = np.asarray(ranking.base, dtype=np.float64)
+        for f in ranking.ranked:
+            img = r + np.where(np.isfinite(ranking.images[f.id]),
+                               ranking.images[f.id] - base, 0.0)
+            if user.clip is not None:
+                img = np.minimum(img, user.clip)
+            hyps.append(_Hypothesis(f, img, Reference(img, ref.variance, ref.name, ref.seeds,
+                                                      ref.spread, ref.quadrature)))
+
+    def known(h):
+        return valid if h.unknown is None else valid & ~h.unknown
+
+    def cheap(h):
+        k = known(h)
+        n = max(int(k.sum()), 1)
+        return float(np.where(k[..., None], w0 * (u - h.image) ** 2, 0).sum()) / n
+
+    order = sorted((h for h in hyps if h is not mono_h), key=cheap)
+    judged = order[:JUDGED] + [mono_h]
+    variances = [var0]
+    for h in judged:
+        conv = h.prediction.convention if h.prediction is not None else None
+        if conv is not None and conv.unmove is not None:
+            # judged in the image's own frame: the noise's level then varies slowly again
+            back, unknown = _moved_back(user, conv.unmove)
+            res = judge_image(back, ref, material_ids, material_names, ignore=unknown)
+            var_h = conv.move(res.arrays["var"])[0]
+        else:
+            res = judge_image(user, h.reference, material_ids, material_names,
+                              ignore=h.unknown)
+            var_h = res.arrays["var"]
+        h.fit.at_noise = bool(res.passed)
+        variances.append(np.where(known(h)[..., None], var_h, np.inf))
+        if log:
+            log(f"suspect {h.fit.id}: " + ("at the noise" if res.passed else "beyond"))
+    v = np.min(variances, axis=0)
+    v = np.maximum(np.where(np.isfinite(v), v, var0), 1e-300)
+    sd = np.sqrt(v)
+    total = _difference_beyond_noise(u - r, sd, valid)
+    for h in hyps:
+        k = known(h)
+        resid = np.where(k[..., None], u - h.image, 0.0)
+        chi = float(np.where(k[..., None], resid ** 2 / v, 0).sum())
+        chi += 3 * float((valid & ~k).sum())       # what it cannot predict counts as noise
+        h.fit.score = chi + 2 * h.parameters
+        left = _difference_beyond_noise(resid, sd, k)
+        h.fit.explains = max(0.0, 1 - left / total) if total > 0 else 0.0
+    passing = sorted((h for h in hyps if h.fit.at_noise), key=lambda h: h.fit.score)
+    named_ones = [h for h in passing if h is not mono_h]
+    first = passing[0] if passing else None
+    if first is mono_h and named_ones:
+        # the generic curve wins only by more than a tie's margin over the best named one
+        if named_ones[0].fit.score - mono_h.fit.score < TIE_SCORE:
+            first = named_ones[0]
+    if first is not None and first is not mono_h:
+        for h in named_ones:
+            if h is first:
+                continue
+            k = known(h) & known(first)
+            s = float(np.where(k[..., None], (h.image - first.image) ** 2 / v, 0).sum())
+            if s < TIE_SCORE and h.fit.id not in first.fit.ties:
+                first.fit.ties.append(h.fit.id)
+                if first.fit.id not in h.fit.ties:
+                    h.fit.ties.append(first.fit.id)
+    if first is not None and first.fit.kind == "formula bug":
+        # "conventions first": of suspects the image cannot tell apart, the way of writing
+        # a right image is the simpler story, and a bug that flips the image is the same
+        tied = [h for h in named_ones if h.fit.id in first.fit.ties and
+                h.fit.kind == "convention"]
+        if tied:
+            first = tied[0]
+    rest = sorted((h for h in hyps if h is not first and not h.fit.at_noise),
+                  key=lambda h: -h.fit.explains)
+    ranked = ([first] if first else []) + [h for h in passing if h is not first] + rest
+    fits = [h.fit for h in ranked]
+    agrees = mono_h.fit.at_noise
+    curve = {"x": [x.tolist() for x in mono.x], "y": [y.tolist() for y in mono.y],
+             "pieces": mono.pieces, "encoding": enc.name, "maxval": enc.maxval,
+             "clip": enc.clip, "at_noise": agrees}
+    return {"named": first is not None, "cause": _cause_words(first, agrees),
+            "transport_agrees": agrees, "judged": [h.fit.id for h in judged],
+            "top": [asdict(f) for f in fits[:TOP]], "ranked": [asdict(f) for f in fits],
+            "curve": curve}
+
+
+def _moved_back(user, unmove):
+    """The user's image (and its per-pixel fields) moved back by ``unmove``."""
+    from dataclasses import replace
+
+    def back(a):
+        return None if a is None else unmove(np.asarray(a))[0]
+
+    image, unknown = unmove(np.asarray(user.image))
+    return replace(user, image=image, step=back(user.step), variance=back(user.variance),
+                   saturated=back(user.saturated)), unknown
+
+
+def _cause_words(first: _Hypothesis | None, agrees: bool) -> str:
+    if first is None:
+        return ("cannot name a cause: no formula bug of the catalog and no way of writing a "
+                "right image explains the difference down to the noise"
+                + ("" if agrees else "; no monotone curve does either, so the light "
+                   "transport differs") + " (where it sits: above)")
+    f = first.fit
+    if f.kind == "formula bug":
+        return f"a formula bug of the catalog explains the difference down to the noise: {f.id}"
+    summary = first.prediction.convention.summary if first.prediction else \
+        "an output curve none of the named ones (fitted: see curve.png)"
+    what = "output encoding" if f.family in ("transfer curve", "quantisation") else \
+        "way of writing the image (" + f.family + ")"
+    if f.params.get("s") is not None and f.id == "exposure-scale":
+        summary += f" (x {f.params['s']:.3g})"
+    return f"your light transport agrees; your {what} differs: it looks like {summary}"
+
+
+def format_cause(sp: dict, top: int = TOP) -> str:
+    """The suspects as ``whitted check`` prints them (``sp``: check.json's ``suspects``)."""
+    fits = [SuspectFit(**f) for f in sp["top"]]
+    lines = [("cause: " if sp.get("named") else "") + sp.get("cause", "")]
+    if sp.get("named"):
+        lines.append("suspects (the first explains the difference down to the noise):")
+    else:
+        lines.append("closest suspects (none leaves only noise: not a diagnosis):")
+    for i, f in enumerate(fits[:top], 1):
+        ties = f"; not told apart from {', '.join(f.ties)}" if f.ties else ""
+        if f.alike:
+            ties += f"; the same pattern, other strength, as {', '.join(f.alike)}"
+        noise = "down to the noise" if f.at_noise else "leaving a difference beyond the noise"
+        if f.kind == "formula bug":
+            lines.append(f"  {i}. {f.id} (lecture: {f.topic}): explains {100 * f.explains:.1f} % "
+                         f"of the difference, {noise}; fitted strength {f.scale:.2f}{ties}")
+        else:
+            lines.append(f"  {i}. {f.id} (convention: {f.family}): explains "
+                         f"{100 * f.explains:.1f} % of the difference, {noise}{ties}")
+        lines.append(f"       formula: {f.formula}")
+        if f.correct:
+            lines.append(f"       right:   {f.correct}")
+        if f.source:
+            lines.append(f"       source:  {f.source}")
     if not fits:
         lines.append("  none: no bug of the catalog that the scene reaches changes its image")
     return "\n".join(lines)
