@@ -156,8 +156,17 @@ other than the film's, an unreadable file, not an image).
 `export`: every built-in scene into DIR as TOML and Mitsuba XML with its reference (EXR,
 PNG) and a manifest; `check`: grade a folder of images named after the scenes against
 `--suite`'s stored references (or references rendered now): one table, `index.html`,
-`suite.json`, exit 1 if any scene fails or has no image; `--update` stores the images as
-the suite's references unless the run fails.
+`suite.json`, a Gradescope autograder `results.json` and a JUnit `junit.xml` for CI,
+exit 1 if any scene fails or has no image; `--update` stores the images as the suite's
+references unless the run fails.
+""",
+    "formulas": """\
+The catalog at the level of one function ([Testing formulas one at a
+time](formulas.md)): each formula's inputs sent to an adapter (a program speaking JSON
+lines, or a Python callable), its answers compared with Mitsuba's function or the
+tracer's within a stated float32 tolerance; per formula pass or fail, the first failing
+input, the expected and given outputs and the catalog bug they match; exit 0 all pass,
+1 any fails, 2 the adapter crashed, timed out or answered garbage.
 """,
 }
 

@@ -281,8 +281,8 @@ def test_suite_update_that_passes_writes_everything_and_no_temporary(work, capsy
     assert "updated 1 reference(s)" in out
     manifest = json.loads((suite / "manifest.json").read_text())
     assert manifest["scenes"][0]["reference"]["source"] == "golden image tiny.exr"
-    assert {p.name for p in (images / "whitted-check").iterdir()} == {"index.html",
-                                                                      "suite.json"}
+    assert {p.name for p in (images / "whitted-check").iterdir()} == {
+        "index.html", "suite.json", "results.json", "junit.xml"}
     _no_temporaries(suite.parent)
 
 

@@ -679,17 +679,93 @@ def grade(images: Path, suite: Suite | Path | None, pattern: str | None = None,
     return result
 
 
-#: What ``whitted suite check`` writes into its output folder.
-OUTPUT_NAMES = ("index.html", "suite.json")
+#: What ``whitted suite check`` writes into its output folder: the page, the JSON, and
+#: the graders' files (Gradescope's ``results.json``, a JUnit ``junit.xml``).
+OUTPUT_NAMES = ("index.html", "suite.json", "results.json", "junit.xml")
 
 
 def write_outputs(result: SuiteResult, outdir: Path) -> list[Path]:
-    """``suite.json`` and ``index.html`` in ``outdir`` (which exists)."""
+    """Every file of :data:`OUTPUT_NAMES` in ``outdir`` (which exists)."""
     from whitted.reference.verdicts.compare import write_json
 
     write_json(outdir / "suite.json", result.to_json())
+    write_json(outdir / "results.json", gradescope_results(result))
+    (outdir / "junit.xml").write_bytes(junit_xml(result))
     (outdir / "index.html").write_text(suite_page(result))
     return [outdir / n for n in OUTPUT_NAMES]
+
+
+# ---------------------------------------------------------------- graders: Gradescope, JUnit
+
+
+def scene_report(g: Graded) -> str:
+    """A graded scene in a few lines of plain text (a grader's per-test output)."""
+    if g.run is None:
+        return f"{g.status}: {g.message or 'no image'}" + (f" ({g.image})" if g.image else "")
+    r = g.run.result
+    lines = [f"{g.status}: {g.image}: {100 * r.pixels['fraction']:.3f} % of the pixels beyond "
+             f"their threshold; largest region |Z| {r.regions['max_abs_z']:.2f} (limit "
+             f"{r.regions['limit']:.2f})"]
+    top = _top_suspect(g.run)
+    if top is not None:
+        lines.append(f"suspect: {top['id']} ({top['topic']}), explains "
+                     f"{100 * top['explains']:.0f} % of the difference")
+    return "\n".join(lines)
+
+
+def gradescope_results(result: SuiteResult) -> dict:
+    """The suite as a Gradescope autograder's ``results.json``: one test a scene, worth one
+    point when it passes (Gradescope's documented schema: ``score``, ``max_score``,
+    ``output``, ``tests`` of ``name``, ``score``, ``max_score``, ``status``, ``output``)."""
+    tests = [{"name": g.name, "score": 1.0 if g.passed else 0.0, "max_score": 1.0,
+              "status": "passed" if g.passed else "failed", "output": scene_report(g),
+              "visibility": "visible"} for g in result.graded]
+    n = sum(g.passed for g in result.graded)
+    output = (f"whitted suite check: {n} of {len(result.graded)} scenes pass"
+              + (f"; not graded (no such scene): {', '.join(result.ignored)}"
+                 if result.ignored else ""))
+    return {"score": float(n), "max_score": float(len(result.graded)), "output": output,
+            "visibility": "visible", "stdout_visibility": "visible", "tests": tests}
+
+
+def _xml_text(text: str) -> str:
+    """``text`` with what XML 1.0 cannot carry (control characters, lone surrogates from a
+    file name that is not UTF-8) written as escapes."""
+    def ok(ch):
+        c = ord(ch)
+        return (c in (9, 10, 13) or 0x20 <= c <= 0xD7FF or 0xE000 <= c <= 0xFFFD
+                or 0x10000 <= c <= 0x10FFFF)
+    return "".join(ch if ok(ch) else f"\\x{ord(ch):02x}" for ch in text)
+
+
+def junit_xml(result: SuiteResult) -> bytes:
+    """The suite as a JUnit XML report (``testsuites/testsuite/testcase``, a ``failure`` for a
+    failing or missing image, an ``error`` for one that cannot be read), as CI systems read
+    it."""
+    import xml.etree.ElementTree as ET
+
+    graded = result.graded
+    failures = sum(g.status in ("FAIL", "missing") for g in graded)
+    errors = sum(g.status == "error" for g in graded)
+    root = ET.Element("testsuites", name="whitted suite check", tests=str(len(graded)),
+                      failures=str(failures), errors=str(errors))
+    suite_el = ET.SubElement(root, "testsuite", name="whitted suite check",
+                             tests=str(len(graded)), failures=str(failures),
+                             errors=str(errors), skipped="0",
+                             timestamp=_dt.datetime.now().isoformat(timespec="seconds"))
+    for g in graded:
+        case = ET.SubElement(suite_el, "testcase", classname="whitted.suite",
+                             name=_xml_text(g.name))
+        if g.passed:
+            continue
+        text = _xml_text(scene_report(g))
+        tag, kind = ("error", "error") if g.status == "error" else ("failure", g.status)
+        el = ET.SubElement(case, tag, message=text.split("\n")[0][:500], type=kind)
+        el.text = text
+    if result.ignored:
+        out = ET.SubElement(suite_el, "system-out")
+        out.text = _xml_text(f"not graded (no such scene): {', '.join(result.ignored)}")
+    return ET.tostring(root, encoding="utf-8", xml_declaration=True) + b"\n"
 
 
 # ---------------------------------------------------------------- --update

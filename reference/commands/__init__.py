@@ -50,6 +50,7 @@ COMMANDS = {
     "assignment": "assignment",
     "check": "check",
     "suite": "suite",
+    "formulas": "formulas",
     "scenes": "scenes",
     "schema": "schema",
 }

@@ -26,7 +26,8 @@ def add_parser(sub) -> None:
                     "each scene tests, which formulas). check DIR: grade a folder of images "
                     "named after the scenes (NAME.exr, .pfm, .hdr, .png or .ppm) against the "
                     "references of --suite SUITE (or references rendered now), as `whitted "
-                    "check` does; write index.html and suite.json; exit 1 if any scene fails "
+                    "check` does; write index.html, suite.json, a Gradescope autograder "
+                    "results.json and a JUnit junit.xml; exit 1 if any scene fails "
                     "or has no image. --update then stores the images as the suite's "
                     "references, unless the run fails.")
     su.add_argument("action", choices=("export", "check"), metavar="export|check",
@@ -38,8 +39,8 @@ def add_parser(sub) -> None:
     su.add_argument("--suite", metavar="SUITE", default=None,
                     help="check: an exported suite folder whose stored references to use")
     su.add_argument("-o", "--output", default=None,
-                    help="check: folder for index.html and suite.json (default: "
-                         "DIR/whitted-check)")
+                    help="check: folder for index.html, suite.json, results.json and "
+                         "junit.xml (default: DIR/whitted-check)")
     su.add_argument("--encoding", choices=ENCODINGS, default=None,
                     help="check: how 8-bit images encode light (as in `whitted check`)")
     su.add_argument("--spp", type=parse_positive, default=None,
@@ -117,7 +118,7 @@ def run(args) -> int:
         pending.commit()
         staged.commit()
     print(suite.format_suite(result))
-    print(f"wrote {shown(out)}/index.html, suite.json")
+    print(f"wrote {shown(out)}/{', '.join(suite.OUTPUT_NAMES)}")
     if args.update:
         if not result.passed:
             print("references not updated: the run fails (fix the failing scenes first)")
