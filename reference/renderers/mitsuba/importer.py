@@ -615,6 +615,9 @@ def imported_cases(quick: bool) -> list[ImportedCase]:
         ImportedCase("instancing", "path", 16 if quick else 64, 4,
                      xml=MITSUBA_DATA / "instancing" / "test_instancing_path.xml"),
         ImportedCase("cornell_box", "path", 16 if quick else 64, 8, 64 if quick else 128),
+        # an orthographic camera whose to_world is two steps (scale, then lookat)
+        ImportedCase("orthographic_sensor", "path", 16 if quick else 64, 4,
+                     xml=MITSUBA_DATA / "orthographic_sensor" / "test_orthographic_path.xml"),
     ]
 
 
