@@ -136,8 +136,10 @@ def test_reader_substitutes_includes_and_maps_every_part(tmp_path):
     cam = d["camera"]
     assert cam["fov"] == 30.0 and cam["fov_axis"] == "y"
     assert cam["principal_point_offset_x"] == 0.1
+    # a flat emission spectrum is 5 xyz_to_srgb(1, 1, 1) in Mitsuba's RGB variants, not grey
     assert d["lights"] == [{"type": "point", "position": [1.0, 2.0, 3.0],
-                            "intensity": [5.0, 5.0, 5.0]}]
+                            "intensity": [6.023969650268555, 4.741455078125,
+                                          4.544580459594727]}]
     glass = d["materials"]["glass"]
     assert glass["ior"] == IOR["bk7"] and glass["type"] == "dielectric"
     cube = d["shapes"][1]

@@ -22,6 +22,9 @@ from whitted.tracer.scene import parse_scene
 
 ROOT = Path(__file__).resolve().parent.parent
 CBOX = ROOT / "tests" / "data" / "real_scenes" / "mitsuba-data" / "scenes" / "cbox"
+#: A real scene the reader refuses (a rough dielectric).
+REFUSED = (ROOT / "tests" / "data" / "real_scenes" / "mitsuba-data" / "tests" / "scenes" /
+           "bsdf_spheres" / "test_roughdielectric_path.xml")
 
 
 @pytest.fixture(scope="module")
@@ -384,7 +387,7 @@ def test_import_command_makes_the_output_folder_and_leaves_none_when_refused(tmp
     r = run_cli("import", CBOX / "cbox-rgb.xml", "-o", out)
     assert r.returncode == 0, r.stderr
     assert out.is_file()
-    r = run_cli("import", CBOX / "cbox-spectral.xml", "-o", tmp_path / "other" / "x.toml")
+    r = run_cli("import", REFUSED, "-o", tmp_path / "other" / "x.toml")
     assert r.returncode == 2 and r.stderr.count("\n") == 1, r.stderr
     assert not (tmp_path / "other").exists()
 
@@ -394,7 +397,7 @@ def test_a_failed_import_leaves_no_folder_behind(tmp_path):
     from whitted.reference.renderers.mitsuba.importer import write_import
 
     with pytest.raises(XMLImportError):
-        write_import(CBOX / "cbox-spectral.xml", tmp_path / "a" / "b" / "x.toml")
+        write_import(REFUSED, tmp_path / "a" / "b" / "x.toml")
     bad = tmp_path / "bad.xml"   # a texture file that is no image: the tracer refuses it
     (tmp_path / "tex.jpg").write_text("not a jpeg")
     bad.write_text(REFS.format(body="""<shape type="sphere"><bsdf type="diffuse">

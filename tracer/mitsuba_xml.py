@@ -13,9 +13,9 @@ before it builds plugins, and maps the plugins onto the scene format's keys:
 * ``<transform>`` with ``translate``, ``rotate``, ``scale``, ``matrix`` and
   ``lookat`` in Mitsuba's order: each step applies after the ones above it,
   which is the order of a ``to_world`` list of steps (first step first);
-* ``rgb`` values as given (the tracer is RGB), ``spectrum`` values that are
-  one number as a grey colour; spectra given per wavelength are spectral-only
-  input (refused; ``approximate`` averages them);
+* ``rgb`` values as given (the tracer is RGB), ``spectrum`` values (one number or
+  wavelength:value pairs) as the colour Mitsuba 3.9.1's RGB variants make of them
+  (:mod:`tracer.spectra`: as a reflectance, an illuminant or an unbounded value);
 * named indices of refraction (:mod:`tracer.mitsuba_ior`) as numbers.
 
 Input is read defensively, as the TOML loader reads it: every file a scene
@@ -53,6 +53,7 @@ from pathlib import Path
 
 import numpy as np
 
+from whitted.tracer import spectra
 from whitted.tracer import transform as tf
 from whitted.tracer.errors import UserError
 from whitted.tracer.limits import MAX_INCLUDES, MAX_SCENE_BYTES, refuse
@@ -464,11 +465,21 @@ APPROXIMATIONS = {
     "roughplastic": ("plastic", "its roughness (a smooth plastic instead)"),
     "principled": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
     "principledthin": ("diffuse", "all but base_color (a diffuse of that colour instead)"),
-    "blendbsdf": ("diffuse", "the blend (its first BSDF's diffuse colour, or grey)"),
     "bumpmap": ("inner", "the bump map (the BSDF it wraps instead)"),
     "normalmap": ("inner", "the normal map (the BSDF it wraps instead)"),
 }
 
+
+#: How Mitsuba's plugins read a spectrum property, by its name (src/emitters/*.cpp read these
+#: with get_emissive_texture, src/bsdfs/conductor.cpp eta and k with get_unbounded_texture;
+#: every other colour is read with get_texture, as a reflectance): tracer/spectra.py.
+SPECTRUM_KINDS = {
+    "radiance": spectra.ILLUMINANT,
+    "intensity": spectra.ILLUMINANT,
+    "irradiance": spectra.ILLUMINANT,
+    "eta": spectra.UNBOUNDED,
+    "k": spectra.UNBOUNDED,
+}
 
 #: Mitsuba BSDF plugin -> the importer's method that maps it (one line per plugin).
 BSDFS = {
@@ -480,6 +491,7 @@ BSDFS = {
     "conductor": "_conductor",
     "plastic": "_plastic",
     "whitted_phong": "_whitted_phong",
+    "blendbsdf": "_blendbsdf",
 }
 
 #: Mitsuba emitter plugin (outside shapes) -> the importer's method that maps it.
@@ -586,26 +598,32 @@ class _Importer:
         if node.tag in ("float", "integer"):
             return [float(self.number(node))] * 3
         if node.tag == "spectrum":
-            if "filename" in node.attrs:
-                self.outside(node, "a spectrum from a file (spectral-only input)", None, where)
-            v = node.attrs.get("value", "")
-            if ":" in v:
-                pairs = [p.split(":") for p in re.split(r",\s*", v.strip()) if p]
-                if any(len(pair) != 2 for pair in pairs):
-                    raise XMLImportError(f"{node.where()}: expected wavelength:value pairs, "
-                                         f"got {_cut(v)}")
-                for wavelength, _ in pairs:
-                    _number(node, wavelength, "a wavelength as")
-                vals = [_number(node, b) for _, b in pairs]
-                self.outside(node, "a spectrum given per wavelength (spectral-only input)",
-                             "its mean over wavelengths, as a grey", where)
-                return [sum(vals) / len(vals)] * 3
-            vals = _floats(node, v)
-            return vals * 3 if len(vals) == 1 else _check_len(node, vals, 3)
+            return self.spectrum(node, where)
         if node.tag == "texture":
             return self.texture(node, where)
         raise XMLImportError(f"{node.where()}: expected a colour (rgb, spectrum, float) or a "
                              "texture")
+
+    def spectrum(self, node: Node, where: str) -> list[float]:
+        """A <spectrum> as the colour Mitsuba 3.9.1's RGB variants make of it
+        (:mod:`tracer.spectra`): as a reflectance, an illuminant or an unbounded value,
+        by the property it gives (:data:`SPECTRUM_KINDS`)."""
+        if "filename" in node.attrs or node.type:
+            what = "a spectrum from a file" if "filename" in node.attrs else \
+                f'a spectrum plugin "{_short(node.type)}"'
+            self.outside(node, f"{what} (spectral-only input)", None, where)
+        kind = SPECTRUM_KINDS.get(node.attrs.get("name", ""), spectra.REFLECTANCE)
+        try:
+            parsed = spectra.parse(node.attrs.get("value", ""))
+        except ValueError as e:
+            raise XMLImportError(f"{node.where()}: {e}") from None
+        if isinstance(parsed, float):
+            return list(spectra.uniform_to_rgb(parsed, kind))
+        wavelengths, values = parsed
+        if spectra.out_of_gamut(wavelengths, values, kind):
+            self.note(where, f"the spectrum of line {node.line} is out of gamut: clamped as "
+                             "Mitsuba clamps it")
+        return list(spectra.to_rgb(wavelengths, values, kind))
 
     def texture(self, node: Node, where: str):
         p = self.props(node)
@@ -911,7 +929,18 @@ class _Importer:
         return self.res.deref(inner[0])
 
     def _twosided(self, node, p, where, two_sided):
-        return self.bsdf(self._inner(node), where, two_sided=True)
+        inner = [c for c in node.children if c.tag in ("bsdf", "ref")]
+        if len(inner) == 2:
+            self.outside(node, "a twosided BSDF with different front and back BSDFs", None,
+                         where)
+        nested = self._inner(node)
+        # Mitsuba's twosided refuses transmission ("Only materials without a transmission
+        # component can be nested!"), and with allow_transmission reads the back side as
+        # the front, which a dielectric or a mask is not: refused here either way.
+        if nested.type in ("dielectric", "thindielectric", "mask"):
+            self.outside(node, f'a twosided around "{_short(nested.type)}" (a BSDF with '
+                               "transmission, which Mitsuba's twosided refuses)", None, where)
+        return self.bsdf(nested, where, two_sided=True)
 
     def _mask(self, node, p, where, two_sided):
         out = self.bsdf(self._inner(node), where, two_sided)
@@ -962,7 +991,9 @@ class _Importer:
         return self._sided({"type": "phong",
                             "diffuse": self.color(p.get("diffuse"), where, [0.5] * 3),
                             "specular": self.color(p.get("specular"), where, [0.2] * 3),
-                            "exponent": float(self.number(p.get("exponent"), 32.0)),
+                            # the plugin's default (reference/materials/phong.py), not
+                            # the scene format's 32
+                            "exponent": float(self.number(p.get("exponent"), 30.0)),
                             "model": self.string(p.get("model"), "phong")}, two_sided)
 
     def _plastic(self, node, p, where, two_sided):
@@ -976,6 +1007,43 @@ class _Importer:
         if self.boolean(p.get("nonlinear"), False):
             out["nonlinear"] = True
         return self._sided(out, two_sided)
+
+    def _blendbsdf(self, node, p, where, two_sided):
+        """Mitsuba's blendbsdf of two smooth BSDFs with a constant weight: a "blend"
+        (tracer/materials/blend.py); others are refused (--approximate: a diffuse of the
+        first BSDF's colour, as before)."""
+        inner = [b for b in (self.res.deref(c) for c in node.children
+                             if c.tag in ("bsdf", "ref")) if b.tag == "bsdf"]
+        weight = p.get("weight")
+        weight = self.res.deref(weight) if weight is not None else None
+        if len(inner) != 2:
+            raise XMLImportError(f"{node.where()}: a blendbsdf needs two nested BSDFs, "
+                                 f"got {len(inner)}")
+        if weight is None:
+            raise XMLImportError(f"{node.where()}: a blendbsdf needs a weight")
+        smooth = ("diffuse", "whitted_phong")
+        reason = None
+        if weight.tag not in ("float", "integer"):
+            reason = f"a weight given as <{_short(weight.tag)}>, not one number"
+        elif not 0 <= self.number(weight) <= 1:
+            reason = "a weight outside [0, 1]"
+        elif any(b.type not in smooth for b in inner):
+            kinds = ", ".join(f'"{_short(b.type)}"' for b in inner if b.type not in smooth)
+            reason = (f"a blend of {kinds}: only smooth BSDFs (diffuse, whitted_phong) are "
+                      "blended, not delta lobes or wrappers")
+        if reason is not None:
+            self.outside(node, f'a "blendbsdf" BSDF ({reason})', 'a smooth "diffuse"', where)
+            colour = self.props(inner[0]).get("reflectance")
+            return self._sided({"type": "diffuse",
+                                "reflectance": self.color(colour, where, [0.5] * 3)},
+                               two_sided)
+        parts = {}
+        for key, b in zip(("first", "second"), inner, strict=True):
+            part = self.bsdf(b, where, two_sided=False)
+            part.pop("two_sided", None)
+            parts[key] = part
+        return self._sided({"type": "blend", **parts, "weight": float(self.number(weight))},
+                           two_sided)
 
     def scalar_or_color(self, node, where, default):
         v = self.color(node, where, [default] * 3)

@@ -22,6 +22,7 @@ from dataclasses import replace
 from types import ModuleType
 
 from whitted.reference.materials import (
+    blend,
     classic,
     conductor,
     dielectric,
@@ -47,6 +48,7 @@ REGISTRY: dict[str, ModuleType] = {
     "plastic": plastic,
     "phong": phong,
     "classic": classic,
+    "blend": blend,
 }
 
 #: "No material" (a shape that only emits): black from both sides.

@@ -21,6 +21,7 @@ from __future__ import annotations
 from types import ModuleType
 
 from whitted.tracer.materials import (
+    blend,
     classic,
     conductor,
     dielectric,
@@ -42,6 +43,7 @@ REGISTRY: dict[str, ModuleType] = {
     "plastic": plastic,
     "phong": phong,
     "classic": classic,
+    "blend": blend,
 }
 
 
