@@ -153,6 +153,8 @@ class Convention:
     fit: Callable | None = None
     #: the number of fitted parameters
     parameters: int = 0
+    #: catalog bugs that make this very image (tied with it whenever both are at the noise)
+    same_as: tuple[str, ...] = ()
 
 
 def _curve(fn: Callable[[np.ndarray, dict], np.ndarray]):
@@ -263,7 +265,7 @@ CONVENTIONS: tuple[Convention, ...] = (
     Convention("upside-down", "orientation", "the image upside down (rows written from the "
                "bottom)", _fixed("file row y holds image row H - 1 - y"), _right_rows,
                ROWS_SOURCE, move=lambda a: (a[::-1].copy(), None),
-               unmove=lambda a: (a[::-1].copy(), None)),
+               unmove=lambda a: (a[::-1].copy(), None), same_as=("camera-y-not-flipped",)),
     Convention("mirrored", "orientation", "the image mirrored left to right",
                _fixed("file pixel x holds image pixel W - 1 - x"), _right_rows, ROWS_SOURCE,
                move=lambda a: (a[:, ::-1].copy(), None),

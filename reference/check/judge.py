@@ -99,7 +99,10 @@ An image that fails is explained (:mod:`reference.check.suspects`): its
 difference split by light path and by first-hit material, and the catalog's
 formula bugs (:mod:`reference.mutants`) that the scene reaches ranked by how
 much of the difference each one's image explains (``suspects``; measured by
-``benchmarks/bench_suspects.py``).
+``benchmarks/bench_suspects.py``), and a cause named only where one suspect, a
+formula bug or a way of writing a right image wrongly
+(:mod:`reference.check.conventions`), leaves only noise
+(:func:`reference.check.suspects.name_cause`).
 """
 
 from __future__ import annotations
@@ -451,7 +454,7 @@ def _pixel_rule(diff, var, quad, nonfinite, fail, percent, hard, z_p, judged=Non
 def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
                 material_names: list[str] | None = None, model_variance: np.ndarray | None = None,
                 thresholds: Thresholds | None = None,
-                ignore: np.ndarray | None = None) -> CheckResult:
+                ignore: np.ndarray | None = None, metrics: bool = True) -> CheckResult:
     """Judge a :class:`~reference.check.images.UserImage` against a :class:`Reference`.
 
     ``model_variance`` is the variance of the image's pixels under ``--spp N``
@@ -569,7 +572,8 @@ def judge_image(user, ref: Reference, material_ids: np.ndarray | None = None,
         notes.append(f"{int(excluded.any(-1).sum()):,} pixels saturated (clipped by an 8-bit "
                      "writer) are left out of the region sums")
     finite_u = np.where(np.isfinite(u), u, r)
-    metrics = asdict(image_metrics(finite_u.astype(np.float32), r.astype(np.float32)))
+    metrics = asdict(image_metrics(finite_u.astype(np.float32), r.astype(np.float32))) \
+        if metrics else {}
     passed = pix.passed and regions["passed"]
     warned = warning is not None and not warning["passed"]
     return CheckResult(bool(passed), bool(warned), method, ref.name, (w, h), asdict(pix),

@@ -37,6 +37,11 @@ whose images are the same on the pixels judged are ties: no image of that
 scene can tell them apart. What the ranking cannot do: name a bug the
 catalog lacks (it then names the bugs whose images look most alike, each
 explaining a part), or two bugs at once (each is fitted alone).
+
+Naming a cause (:func:`name_cause`): the bugs at strength 1, the conventions of
+:mod:`reference.check.conventions` and a fitted monotone curve, each judged by
+the check's own rules on what it leaves; one is named only when it leaves
+noise alone and scores best, otherwise "cannot name a cause" (``docs/check.md``).
 """
 
 from __future__ import annotations
@@ -657,11 +662,12 @@ def name_cause(user, ref, result, material_ids=None, material_names=None,
         if conv is not None and conv.unmove is not None:
             # judged in the image's own frame: the noise's level then varies slowly again
             back, unknown = _moved_back(user, conv.unmove)
-            res = judge_image(back, ref, material_ids, material_names, ignore=unknown)
+            res = judge_image(back, ref, material_ids, material_names, ignore=unknown,
+                              metrics=False)
             var_h = conv.move(res.arrays["var"])[0]
         else:
             res = judge_image(user, h.reference, material_ids, material_names,
-                              ignore=h.unknown)
+                              ignore=h.unknown, metrics=False)
             var_h = res.arrays["var"]
         h.fit.at_noise = bool(res.passed)
         variances.append(np.where(known(h)[..., None], var_h, np.inf))
@@ -681,21 +687,33 @@ def name_cause(user, ref, result, material_ids=None, material_names=None,
         h.fit.explains = max(0.0, 1 - left / total) if total > 0 else 0.0
     passing = sorted((h for h in hyps if h.fit.at_noise), key=lambda h: h.fit.score)
     named_ones = [h for h in passing if h is not mono_h]
-    first = passing[0] if passing else None
-    if first is mono_h and named_ones:
-        # the generic curve wins only by more than a tie's margin over the best named one
-        if named_ones[0].fit.score - mono_h.fit.score < TIE_SCORE:
-            first = named_ones[0]
+    # The generic curve is first only when no named suspect is at the noise: a named one
+    # that is says more (the curve also fits what noise does to a steep curve's dark end).
+    first = named_ones[0] if named_ones else (mono_h if mono_h.fit.at_noise else None)
+
+    def same(h, g):
+        for a, b in ((h, g), (g, h)):
+            if a.prediction is not None and b.fit.id in a.prediction.convention.same_as:
+                return True
+        return False
     if first is not None and first is not mono_h:
         for h in named_ones:
             if h is first:
                 continue
             k = known(h) & known(first)
             s = float(np.where(k[..., None], (h.image - first.image) ** 2 / v, 0).sum())
-            if s < TIE_SCORE and h.fit.id not in first.fit.ties:
+            if (s < TIE_SCORE or same(h, first)) and h.fit.id not in first.fit.ties:
                 first.fit.ties.append(h.fit.id)
                 if first.fit.id not in h.fit.ties:
                     h.fit.ties.append(first.fit.id)
+    if first is not None and first.prediction is not None:
+        # a bug that makes this very image (by construction) is a tie, at the noise or not
+        # (its own render differs from the moved reference only by light samples' noise)
+        for h in hyps:
+            if h.fit.id in first.prediction.convention.same_as and \
+                    h.fit.id not in first.fit.ties:
+                first.fit.ties.append(h.fit.id)
+                h.fit.ties.append(first.fit.id)
     if first is not None and first.fit.kind == "formula bug":
         # "conventions first": of suspects the image cannot tell apart, the way of writing
         # a right image is the simpler story, and a bug that flips the image is the same
