@@ -206,11 +206,11 @@ CATALOG: tuple[Mutant, ...] = (
        "A rectangle light's area taken from the unit square instead of Mitsuba's "
        "[-1, 1]^2.",
        "A = |u x v|", "A = 4 |u x v| (half-edges u, v)",
-       L1, "Shadow computation", "tracer/emitters/area.py: _Parallelogram.local_area"),
+       L1, "Shadow computation", "tracer/shapes/rectangle.py: Sampler.local_area"),
     _m("area-pdf-disk",
        "A disk light's area taken as its bounding square's.",
        "A = 4 |u x v|", "A = pi |u x v|",
-       L1, "Shadow computation", "tracer/emitters/area.py: _Ellipse.local_area"),
+       L1, "Shadow computation", "tracer/shapes/disk.py: Sampler.local_area"),
     _m("area-pdf-sphere-cone",
        "The solid angle of the cone a sphere light subtends without the 2 of the "
        "azimuth's 2 pi.",
@@ -260,11 +260,11 @@ CATALOG: tuple[Mutant, ...] = (
     _m("unnormalized-normal",
        "The sphere's normal is the gradient p - c, not divided by the radius.",
        "n = p - c", "n = (p - c) / r",
-       L1, "Surface normals", "tracer/geometry.py: _SphereBlock.surface"),
+       L1, "Surface normals", "tracer/shapes/sphere.py: Block.surface"),
     _m("normal-not-renormalized",
        "Interpolated vertex normals are used without normalising them again.",
        "n = b0 n0 + b1 n1 + b2 n2", "n = normalize(b0 n0 + b1 n1 + b2 n2)",
-       L2, "Interpolating normals", "tracer/geometry.py: _MeshBlock.surface"),
+       L2, "Interpolating normals", "tracer/shapes/mesh.py: Block.surface"),
     _m("barycentrics-swapped",
        "Vertex attributes (normals, texture coordinates) interpolated with the "
        "barycentrics of the second and third vertex swapped.",

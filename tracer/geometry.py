@@ -2,8 +2,10 @@
 
 Shapes are gathered into blocks of one kind each (spheres, rectangles,
 disks, single triangles, polygons, cylinders, paraboloids, one block per
-mesh, one per instance). Every primitive has a global id: each block owns a
-contiguous range. A query asks every block for its nearest hit and keeps the
+mesh, one per instance). Each kind's module (``tracer/shapes/<kind>.py``)
+packs its own blocks and intersects them; :func:`pack` is the one loop over
+the kinds, and instancing, which recurses into a group's geometry, is here.
+Every primitive has a global id: each block owns a contiguous range. A query asks every block for its nearest hit and keeps the
 nearest of all, which is what lecture 1's "Intersection routine" does for
 one ray at a time, here for a whole wavefront at once.
 
@@ -33,61 +35,22 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from whitted.tracer import backend, faults
-from whitted.tracer.backend import any_mask, jit, upload, upload_rows
-from whitted.tracer.scene import (
-    Cylinder,
-    Disk,
-    Instance,
-    Mesh,
-    Paraboloid,
-    Polygon,
-    Rectangle,
-    Sphere,
-    Triangle,
-)
-from whitted.tracer.shapes import cylinder as cyl_f
-from whitted.tracer.shapes import disk as disk_f
-from whitted.tracer.shapes import paraboloid as par_f
-from whitted.tracer.shapes import polygon as poly_f
-from whitted.tracer.shapes import rectangle as rect_f
-from whitted.tracer.shapes import sphere as sphere_f
-from whitted.tracer.shapes import triangle as tri_f
-
-INVALID = 0xFFFFFFFF
-
-#: Tables up to this size are unrolled into the kernel with constant numbers.
-UNROLL = 16
+from whitted.tracer import backend, faults, shapes
+from whitted.tracer.backend import any_mask, jit, upload
+from whitted.tracer.shapes import mesh as shapes_mesh
+from whitted.tracer.shapes.base import INVALID as INVALID
+from whitted.tracer.shapes.base import UNROLL as UNROLL
+from whitted.tracer.shapes.base import Block as _Block
+from whitted.tracer.shapes.base import affine as _affine
+from whitted.tracer.shapes.base import pack as base_pack
+from whitted.tracer.shapes.base import uints as _u
+from whitted.tracer.shapes.base import v3 as _v3
+from whitted.tracer.shapes.instance import Instance
+from whitted.tracer.shapes.sphere import Block as _SphereBlock  # noqa: F401 (tests use it)
 
 #: A group instanced this many times or more is searched through a hierarchy of its
 #: instances' boxes (:class:`_InstanceSetBlock`); fewer are unrolled one by one.
 INSTANCE_SET_MIN = 8
-
-
-def _v3(rows) -> object:
-    return upload_rows(jit.Array3f, rows)
-
-
-def _f(values) -> object:
-    return upload(jit.Float, values, np.float32)
-
-
-def _u(values) -> object:
-    return upload(jit.UInt32, values, np.uint32)
-
-
-def _c3(v) -> object:
-    """A constant 3-vector written into the kernel."""
-    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
-
-
-def _affine(m: np.ndarray, p, point: bool = True):
-    """The 4x4 (or 3x3) matrix m, as kernel constants, applied to a point or a vector."""
-    rows = [jit.Array3f(float(m[r, 0]), float(m[r, 1]), float(m[r, 2])) for r in range(3)]
-    x, y, z = (dr.dot(row, p) for row in rows)
-    if point:
-        x, y, z = x + float(m[0, 3]), y + float(m[1, 3]), z + float(m[2, 3])
-    return jit.Array3f(x, y, z)
 
 
 @dataclass
@@ -110,371 +73,8 @@ class Surface:
     uv: object
 
 
-# --------------------------------------------------------------------------- blocks
 
-
-class _Block:
-    """A contiguous range of primitive ids [base, base + count) of one kind."""
-    base = 0
-    count = 0
-
-    def intersect(self, o, d, t, prim, active):
-        raise NotImplementedError
-
-    def surface(self, k, o, d, t, mask):
-        """(p, n, ns, uv) for lanes in ``mask``, whose local primitive index is k."""
-        raise NotImplementedError
-
-    #: whether :meth:`occluded` stops at the first hit (else it is the closest hit's)
-    any_hit = False
-
-    def occluded(self, o, d, tmax, active):
-        """Where one of the block's primitives lies on the ray at 0 < t < tmax (lanes in
-        ``active``; others may answer anything): by default its closest hit."""
-        _, prim = self.intersect(o, d, tmax, dr.full(jit.UInt32, INVALID, dr.width(tmax)),
-                                 active)
-        return prim != INVALID
-
-    def intersect_group(self, rays, ts, prims):
-        """:meth:`intersect` of K rays a lane, ``rays`` a list of K (o, d, active): lists
-        of K t and prim. By default each ray on its own; a block that can walk the K
-        rays of a lane together (:class:`_MeshBlock`) does."""
-        out = [self.intersect(o, d, t, prim, a)
-               for (o, d, a), t, prim in zip(rays, ts, prims, strict=True)]
-        return [t for t, _ in out], [prim for _, prim in out]
-
-    def occluded_group(self, rays):
-        """:meth:`occluded` of K rays a lane, ``rays`` a list of K (o, d, tmax, active)."""
-        return [self.occluded(*ray) for ray in rays]
-
-    def _update(self, ti, hit, i, t, prim):
-        return dr.select(hit, ti, t), dr.select(hit, i + self.base, prim)
-
-    def test(self, o, d, t, i):
-        """(t, hit) of primitive i (a Python int, or a UInt32 array for looped tables)."""
-        raise NotImplementedError
-
-    def _unrolled(self, o, d, t, prim):
-        """Every primitive written into the kernel one after another, nearest hit kept."""
-        for i in range(self.count):
-            ti, hit = self.test(o, d, t, i)
-            t, prim = self._update(ti, hit, i, t, prim)
-        return t, prim
-
-
-class _TableBlock(_Block):
-    """Primitives stored as arrays; unrolled with constants when few, else a symbolic loop."""
-    fields: tuple[str, ...] = ()
-
-    def _constants(self):
-        self.const = {}
-        for name in self.fields:
-            a = getattr(self, name).numpy()
-            if a.ndim == 1:
-                self.const[name] = [float(x) for x in a]
-            else:
-                self.const[name] = [jit.Array3f(*(float(x) for x in col)) for col in a.T]
-
-    def get(self, name, i, active=True):
-        if isinstance(i, int):
-            return self.const[name][i]
-        src = getattr(self, name)
-        return dr.gather(type(src), src, i, active)
-
-    def intersect(self, o, d, t, prim, active):
-        if self.count <= UNROLL:
-            return self._unrolled(o, d, t, prim)
-        return self._looped(o, d, t, prim, active)
-
-    @backend.syntax
-    def _looped(self, o, d, t, prim, active):
-        i = jit.UInt32(0)
-        count = dr.opaque(jit.UInt32, self.count)
-        while active & (i < count):
-            ti, hit = self.test(o, d, t, i)
-            t, prim = self._update(ti, hit, i, t, prim)
-            i += 1
-        return t, prim
-
-
-class _SphereBlock(_TableBlock):
-    fields = ("c", "r")
-
-    def __init__(self, spheres: list[Sphere]):
-        self.count = len(spheres)
-        self.c = _v3([s.center for s in spheres])
-        self.r = _f([s.radius for s in spheres])
-        # Rows of each sphere's inverse rotation (its local frame, for uv).
-        rot = np.asarray([np.asarray(s.rotation) for s in spheres])  # (N, 3, 3)
-        self.r0, self.r1, self.r2 = (_v3(rot[:, :, k]) for k in range(3))
-        self._constants()
-
-    def test(self, o, d, t, i):
-        return sphere_f.intersect(o, d, self.get("c", i), self.get("r", i), t)
-
-    def _unrolled(self, o, d, t, prim):
-        """The nearest sphere, the roots compared as fractions and the nearest divided
-        once (:func:`tracer.shapes.sphere.nearest_fraction`): one division a ray, not
-        one a sphere (a vector division and a square root each take the one divider
-        unit for many cycles). t is :meth:`test`'s for the sphere found, and that
-        sphere is :meth:`test`'s but where two spheres' roots are within rounding of
-        each other."""
-        num, den = t, jit.Float(1.0)
-        for i in range(self.count):
-            n_i, d_i, hit = sphere_f.nearest_fraction(o, d, self.get("c", i),
-                                                      self.get("r", i))
-            closer = hit & (n_i * den < num * d_i)   # n_i / d_i < num / den, dens > 0
-            num = dr.select(closer, n_i, num)
-            den = dr.select(closer, d_i, den)
-            prim = dr.select(closer, i + self.base, prim)
-        return num / den, prim
-
-    any_hit = True
-
-    def occluded(self, o, d, tmax, active):
-        """Any sphere with a root in (0, tmax) (:func:`tracer.shapes.sphere.occludes`: no
-        division); many spheres in a loop that stops at the first."""
-        if self.count > UNROLL:
-            return self._occluded_looped(o, d, tmax, active)
-        hit = dr.zeros(jit.Bool, dr.width(tmax))
-        for i in range(self.count):
-            hit |= sphere_f.occludes(o, d, self.get("c", i), self.get("r", i), tmax)
-        return hit
-
-    @backend.syntax
-    def _occluded_looped(self, o, d, tmax, active):
-        i = jit.UInt32(0)
-        hit = dr.zeros(jit.Bool, dr.width(tmax))
-        count = dr.opaque(jit.UInt32, self.count)
-        while active & ~hit & (i < count):
-            hit = sphere_f.occludes(o, d, self.get("c", i), self.get("r", i), tmax)
-            i += 1
-        return hit
-
-    def surface(self, k, o, d, t, mask):
-        c = self.get("c", k, mask)
-        r = self.get("r", k, mask)
-        p = dr.fma(d, t, o)
-        n = dr.normalize(p - c)
-        p = dr.fma(n, r, c)  # re-project onto the sphere: the error stays relative to r
-        if faults.on("unnormalized-normal"):
-            n = n * r   # the gradient p - c, not divided by r
-        # Local direction R^T n (columns of R are the local axes in world space).
-        local = jit.Array3f(dr.dot(dr.gather(jit.Array3f, self.r0, k, mask), n),
-                            dr.dot(dr.gather(jit.Array3f, self.r1, k, mask), n),
-                            dr.dot(dr.gather(jit.Array3f, self.r2, k, mask), n))
-        phi = dr.atan2(local.y, local.x)
-        phi = dr.select(phi < 0, phi + 2 * dr.pi, phi)
-        uv = jit.Array2f(phi * (0.5 / dr.pi), dr.acos(dr.clip(local.z, -1, 1)) / dr.pi)
-        return p, n, n, uv
-
-
-class _PlanarBlock(_TableBlock):
-    """Rectangles or disks: a centre, two axes (as a dual basis) and a normal."""
-    fields = ("c", "n", "ud", "vd")
-
-    def __init__(self, shapes, round_: bool):
-        self.round = round_
-        self.count = len(shapes)
-        frames = [s.corners() for s in shapes]
-        duals = [rect_f.frame(c, u, v) for c, u, v in frames]
-        self.c = _v3([c for c, _, _ in frames])
-        self.n = _v3([s.normal() for s in shapes])  # Mitsuba's: inverse transpose of +z
-        self.ud = _v3([ud for _, ud, _ in duals])
-        self.vd = _v3([vd for _, _, vd in duals])
-        self._constants()
-
-    def test(self, o, d, t, i):
-        f = disk_f.intersect if self.round else rect_f.intersect
-        ti, hit, _, _ = f(o, d, self.get("c", i), self.get("n", i), self.get("ud", i),
-                          self.get("vd", i), t)
-        return ti, hit
-
-    def surface(self, k, o, d, t, mask):
-        c, n = self.get("c", k, mask), self.get("n", k, mask)
-        p = dr.fma(d, t, o)
-        p = p - dr.dot(p - c, n) * n  # re-project onto the plane
-        rel = p - c
-        a = dr.dot(rel, self.get("ud", k, mask))
-        b = dr.dot(rel, self.get("vd", k, mask))
-        uv = jit.Array2f(*(disk_f.uv(a, b) if self.round else rect_f.uv(a, b)))
-        return p, n, n, uv
-
-
-class _TriangleBlock(_TableBlock):
-    # The corners themselves (not p0 and two edges): a vertex that two triangles share
-    # is then the same float32 point in both, which the watertight test needs.
-    fields = ("p0", "p1", "p2")
-
-    def __init__(self, tris: list[Triangle]):
-        self.count = len(tris)
-        v = np.asarray([t.vertices for t in tris], dtype=np.float64)
-        self.p0, self.p1, self.p2 = (_v3(v[:, k]) for k in range(3))
-        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
-        self.n = _v3(n / np.linalg.norm(n, axis=1, keepdims=True))
-        self._constants()
-
-    def test(self, o, d, t, i):
-        ti, hit, _, _ = tri_f.intersect(o, d, self.get("p0", i), self.get("p1", i),
-                                        self.get("p2", i), t)
-        return ti, hit
-
-    def surface(self, k, o, d, t, mask):
-        n = dr.gather(jit.Array3f, self.n, k, mask)
-        p0, p1, p2 = (dr.gather(jit.Array3f, getattr(self, f), k, mask) for f in self.fields)
-        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1, p2, dr.inf)
-        # Mitsuba's mesh without texture coordinates: uv = (beta, gamma).
-        return dr.fma(d, t, o), n, n, jit.Array2f(beta, gamma)
-
-
-class _PolygonBlock(_Block):
-    """Each polygon unrolled: its plane and its 2D outline as kernel constants."""
-
-    def __init__(self, polys: list[Polygon]):
-        self.count = len(polys)
-        self.items = []
-        for poly in polys:
-            pts = np.asarray(poly.vertices, dtype=np.float64)
-            origin, u, v, n = poly_f.plane_frame(pts)
-            xy = (pts - origin) @ np.stack([u, v], axis=1)
-            self.items.append((origin, u, v, n, [float(x) for x in xy[:, 0]],
-                               [float(y) for y in xy[:, 1]]))
-
-    def test(self, o, d, t, i):
-        origin, u, v, n, xs, ys = self.items[i]
-        ti, hit, _, _ = poly_f.intersect(o, d, _c3(origin), _c3(n), _c3(u), _c3(v), xs, ys, t)
-        return ti, hit
-
-    def intersect(self, o, d, t, prim, active):
-        return self._unrolled(o, d, t, prim)
-
-    def surface(self, k, o, d, t, mask):
-        p = dr.fma(d, t, o)
-        n = dr.zeros(jit.Array3f, dr.width(p))
-        uv = dr.zeros(jit.Array2f, dr.width(p))
-        for i, (origin, u, v, nn, _, _) in enumerate(self.items):
-            sel = mask & (k == i)
-            rel = p - _c3(origin)
-            n = dr.select(sel, _c3(nn), n)
-            # The plane's own 2D coordinates (the conversion gives Mitsuba the same uvs).
-            uv = dr.select(sel, jit.Array2f(dr.dot(rel, _c3(u)), dr.dot(rel, _c3(v))), uv)
-        return p, n, n, uv
-
-
-class _QuadricBlock(_Block):
-    """Cylinders or paraboloids, each intersected in its own local space (unrolled)."""
-
-    def __init__(self, shapes, kind: str):
-        self.kind = kind
-        self.count = len(shapes)
-        self.items = []
-        for s in shapes:
-            m = s.local_to_world() if kind == "cyl" else np.asarray(s.to_world)
-            inv = np.linalg.inv(m)
-            normal_m = np.linalg.inv(m[:3, :3]).T  # normals: the inverse transpose
-            extra = None if kind == "cyl" else (1 / s.a ** 2, 1 / s.b ** 2, s.height, s.a, s.b)
-            self.items.append((m, inv, normal_m, extra))
-
-    def test(self, o, d, t, i):
-        _, inv, _, extra = self.items[i]
-        ol, dl = _affine(inv, o), _affine(inv, d, point=False)
-        if self.kind == "cyl":
-            return cyl_f.intersect(ol, dl, t)
-        ia2, ib2, h, _, _ = extra
-        return par_f.intersect(ol, dl, ia2, ib2, h, t)
-
-    def intersect(self, o, d, t, prim, active):
-        return self._unrolled(o, d, t, prim)
-
-    def surface(self, k, o, d, t, mask):
-        p = dr.fma(d, t, o)
-        n = dr.zeros(jit.Array3f, dr.width(p))
-        uv = dr.zeros(jit.Array2f, dr.width(p))
-        pw = p
-        for i, item in enumerate(self.items):
-            sel = mask & (k == i)
-            m, inv, normal_m, extra = item
-            local = _affine(inv, p)
-            if self.kind == "cyl":
-                # Re-project onto the unit cylinder, as Mitsuba does, to limit round-off.
-                inv_r = dr.rsqrt(local.x * local.x + local.y * local.y)
-                local = jit.Array3f(local.x * inv_r, local.y * inv_r, local.z)
-                grad = cyl_f.local_normal(local)
-                u, v = cyl_f.uv(local)
-            else:
-                ia2, ib2, h, a, b = extra
-                grad = par_f.gradient(local, ia2, ib2)
-                u, v = par_f.uv(local, a, b, h)
-            nw = dr.normalize(_affine(normal_m, grad, point=False))
-            n = dr.select(sel, nw, n)
-            pw = dr.select(sel, _affine(m, local), pw)
-            uv = dr.select(sel, jit.Array2f(u, v), uv)
-        return pw, n, n, uv
-
-
-class _MeshBlock(_Block):
-    """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
-
-    def __init__(self, mesh: Mesh):
-        from whitted.tracer.bvh import shared_bvh
-
-        v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
-        self.count = len(f)
-        self.bvh = shared_bvh(v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
-        n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
-        n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
-        self.face_n = _v3(n)
-        self.faces = _u(f.reshape(-1))
-        self.p = _v3(v)
-        self.vn = None if mesh.normals is None else _v3(mesh.normals)
-        self.vt = None
-        if mesh.uvs is not None:
-            self.vt = upload_rows(jit.Array2f, mesh.uvs)
-
-    def intersect(self, o, d, t, prim, active):
-        (t,), (prim,) = self.intersect_group([(o, d, active)], [t], [prim])
-        return t, prim
-
-    any_hit = True
-
-    def occluded(self, o, d, tmax, active):
-        return self.bvh.occluded(o, d, tmax, active)
-
-    def intersect_group(self, rays, ts, prims):
-        found = self.bvh.closest_hit_group([(o, d, t, a) for (o, d, a), t
-                                            in zip(rays, ts, strict=True)])
-        out = [self._update(ti, tri != INVALID, tri, t, prim)
-               for (ti, tri, _, _), t, prim in zip(found, ts, prims, strict=True)]
-        return [t for t, _ in out], [prim for _, prim in out]
-
-    def occluded_group(self, rays):
-        return self.bvh.occluded_group(rays)
-
-    def surface(self, k, o, d, t, mask):
-        i0 = dr.gather(jit.UInt32, self.faces, 3 * k, mask)
-        i1 = dr.gather(jit.UInt32, self.faces, 3 * k + 1, mask)
-        i2 = dr.gather(jit.UInt32, self.faces, 3 * k + 2, mask)
-        p0 = dr.gather(jit.Array3f, self.p, i0, mask)
-        p1 = dr.gather(jit.Array3f, self.p, i1, mask)
-        p2 = dr.gather(jit.Array3f, self.p, i2, mask)
-        _, _, beta, gamma = tri_f.intersect(o, d, p0, p1, p2, dr.inf)
-        n = dr.gather(jit.Array3f, self.face_n, k, mask)
-        ns = n
-        if self.vn is not None:  # barycentric interpolation of the vertex normals
-            ns = tri_f.interpolate(
-                beta, gamma, dr.gather(jit.Array3f, self.vn, i0, mask),
-                dr.gather(jit.Array3f, self.vn, i1, mask),
-                dr.gather(jit.Array3f, self.vn, i2, mask))
-            if not faults.on("normal-not-renormalized"):
-                ns = dr.normalize(ns)
-        if self.vt is not None:
-            uv = tri_f.interpolate(beta, gamma, dr.gather(jit.Array2f, self.vt, i0, mask),
-                                   dr.gather(jit.Array2f, self.vt, i1, mask),
-                                   dr.gather(jit.Array2f, self.vt, i2, mask))
-        else:
-            uv = jit.Array2f(beta, gamma)
-        return dr.fma(d, t, o), n, ns, uv
-
+# --------------------------------------------------------------------------- instances
 
 class _InstanceBlock(_Block):
     """A group's geometry seen through to_world (lecture 2: transform the ray, not the shape)."""
@@ -507,33 +107,12 @@ class _InstanceBlock(_Block):
         ns = dr.normalize(_affine(self.normal_m, s.ns, point=False))
         return p, n, ns, s.uv
 
-
 def shape_bounds(shape) -> tuple[np.ndarray, np.ndarray]:
     """(lo, hi): an axis-aligned box around a shape, in the space its coordinates are in."""
-    def box_of(points):
-        p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-        return p.min(axis=0), p.max(axis=0)
-
-    def corners(m, lo, hi):
-        c = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1])
-                      for z in (lo[2], hi[2])], dtype=np.float64)
-        return box_of(c @ np.asarray(m, dtype=np.float64)[:3, :3].T +
-                      np.asarray(m, dtype=np.float64)[:3, 3])
-
-    if isinstance(shape, Sphere):
-        c = np.asarray(shape.center, dtype=np.float64)
-        return c - shape.radius, c + shape.radius
-    if isinstance(shape, (Rectangle, Disk)):
-        return corners(shape.to_world, (-1, -1, 0), (1, 1, 0))
-    if isinstance(shape, (Triangle, Polygon, Mesh)):
-        return box_of(shape.vertices)
-    if isinstance(shape, Cylinder):
-        return corners(shape.local_to_world(), (-1, -1, 0), (1, 1, 1))
-    if isinstance(shape, Paraboloid):
-        s = np.sqrt(shape.height)
-        return corners(shape.to_world, (-shape.a * s, -shape.b * s, 0),
-                       (shape.a * s, shape.b * s, shape.height))
-    raise TypeError(f"no bounds for {type(shape).__name__}")
+    fn = getattr(shapes.module_of(shape), "bounds", None)
+    if fn is None:
+        raise TypeError(f"no bounds for {type(shape).__name__}")
+    return fn(shape)
 
 
 class _InstanceSetBlock(_Block):
@@ -649,6 +228,85 @@ def instance_normal_matrix(m: np.ndarray) -> np.ndarray:
         return m3.copy()
     return np.swapaxes(np.linalg.inv(m3), -1, -2)
 
+# --------------------------------------------------------------------------- packing
+
+
+#: The order in which the kinds' blocks take their primitive ids, as before shapes became
+#: plugins, so that ties between kinds resolve as they did; kinds in one entry are packed
+#: together in the scene's order (a cube is a mesh). Kinds not named here come after
+#: these, in registry order (tracer/shapes/__init__.py).
+PACK_ORDER = ("sphere", "rectangle", "disk", "triangle", "polygon", "cylinder", "paraboloid",
+              ("mesh", "cube"), "instance")
+
+
+def pack(members: list, packing: Packing) -> list:
+    """Every kind's blocks, in :data:`PACK_ORDER`: (block, material ids, radiances) each.
+
+    The one loop over kinds: each kind's module packs its own shapes (its
+    ``pack(members, packing)``, or one ``Block(members)`` by default,
+    :func:`tracer.shapes.base.pack`).
+    """
+    entries = [e if isinstance(e, tuple) else (e,) for e in PACK_ORDER]
+    named = {k for e in entries for k in e}
+    entries += [(k,) for k in shapes.REGISTRY if k not in named]
+    out = []
+    for kinds in entries:
+        mine = [s for s in members if shapes.type_of(s) in kinds]
+        if mine:
+            module = shapes.REGISTRY[kinds[0]]
+            if hasattr(module, "pack"):
+                out += module.pack(mine, packing)
+            else:
+                out += base_pack(module, mine, packing)
+    return out
+
+
+class Packing:
+    """What a kind's ``pack`` asks of the geometry: its primitives' material ids and
+    radiances, and the geometry of a group (instances)."""
+
+    def __init__(self, scene, names: list):
+        self.scene, self.names = scene, names
+
+    def material_id(self, shape) -> int:
+        return len(self.names) if shape.material is None else self.names.index(shape.material)
+
+    def rows(self, members: list) -> tuple[np.ndarray, np.ndarray]:
+        """Material ids and radiances of one primitive a shape."""
+        mids = np.asarray([self.material_id(m) for m in members], dtype=np.uint32)
+        rads = np.asarray([m.emitter.radiance if m.emitter is not None else (0, 0, 0)
+                           for m in members], dtype=np.float32).reshape(-1, 3)
+        return mids, rads
+
+    def repeated(self, shape, count: int) -> tuple[np.ndarray, np.ndarray]:
+        """Material ids and radiances of ``count`` primitives of one shape (a mesh's)."""
+        mids = np.full(count, self.material_id(shape), dtype=np.uint32)
+        radiance = shape.emitter.radiance if shape.emitter is not None else (0, 0, 0)
+        return mids, np.tile(np.asarray(radiance, dtype=np.float32), (count, 1))
+
+    def instances(self, insts: list) -> list:
+        """Instances: one geometry per group (its own materials; groups do not emit), the
+        instances of a much-used group in one hierarchy, the others one by one."""
+        scene, out = self.scene, []
+        by_group: dict[str, list] = {}
+        for inst in insts:
+            by_group.setdefault(inst.group, []).append(inst)
+        for gname, group in by_group.items():
+            members = scene.groups[gname]
+            child = Geometry(scene, members, self.names)
+            child_mid = child.material_id.numpy()[:child.count]
+            if len(group) >= INSTANCE_SET_MIN:
+                boxes = [shape_bounds(s) for s in members]
+                bounds = (np.min([b[0] for b in boxes], axis=0),
+                          np.max([b[1] for b in boxes], axis=0))
+                group_blocks = [_InstanceSetBlock(group, child, bounds)]
+            else:
+                group_blocks = [_InstanceBlock(inst, child) for inst in group]
+            for block in group_blocks:
+                out.append((block, np.tile(child_mid, block.count // max(child.count, 1)),
+                            np.zeros((block.count, 3), dtype=np.float32)))
+        return out
+
 
 # --------------------------------------------------------------------------- geometry
 
@@ -657,72 +315,25 @@ class Geometry:
     """All shapes of a scene (or of one group), with intersection and hit records."""
 
     def __init__(self, scene, shapes=None, material_names=None):
-        shapes = list(scene.shapes if shapes is None else shapes)
-        names = list(scene.materials) if material_names is None else material_names
-
-        def of(kind):
-            return [s for s in shapes if type(s) is kind]
-
+        members = list(scene.shapes if shapes is None else shapes)
+        packing = Packing(scene, list(scene.materials) if material_names is None
+                          else material_names)
         self.blocks = []
         mids, rads = [], []  # per block: material ids and radiances of its primitives
-
-        def mat_id(shape) -> int:
-            return len(names) if shape.material is None else names.index(shape.material)
-
-        def add(block, members):
+        for block, mid, rad in pack(members, packing):
             block.base = sum(b.count for b in self.blocks)
             self.blocks.append(block)
-            mids.append(np.asarray([mat_id(m) for m in members], dtype=np.uint32))
-            rads.append(np.asarray([m.emitter.radiance if m.emitter is not None else (0, 0, 0)
-                                    for m in members], dtype=np.float32).reshape(-1, 3))
-
-        for kind, make in ((Sphere, _SphereBlock),
-                           (Rectangle, lambda s: _PlanarBlock(s, False)),
-                           (Disk, lambda s: _PlanarBlock(s, True)),
-                           (Triangle, _TriangleBlock), (Polygon, _PolygonBlock),
-                           (Cylinder, lambda s: _QuadricBlock(s, "cyl")),
-                           (Paraboloid, lambda s: _QuadricBlock(s, "par"))):
-            members = of(kind)
-            if members:
-                add(make(members), members)
-        # one material and one emitter for all its triangles (cubes too)
-        for mesh in [s for s in shapes if isinstance(s, Mesh)]:
-            block = _MeshBlock(mesh)
-            block.base = sum(b.count for b in self.blocks)
-            self.blocks.append(block)
-            mids.append(np.full(block.count, mat_id(mesh), dtype=np.uint32))
-            radiance = mesh.emitter.radiance if mesh.emitter is not None else (0, 0, 0)
-            rads.append(np.tile(np.asarray(radiance, dtype=np.float32), (block.count, 1)))
-        # Instances: one geometry per group (its own materials; groups do not emit), the
-        # instances of a much-used group in one hierarchy, the others one by one.
-        by_group: dict[str, list[Instance]] = {}
-        for inst in of(Instance):
-            by_group.setdefault(inst.group, []).append(inst)
-        for gname, insts in by_group.items():
-            members = scene.groups[gname]
-            child = Geometry(scene, members, names)
-            child_mid = child.material_id.numpy()[:child.count]
-            if len(insts) >= INSTANCE_SET_MIN:
-                boxes = [shape_bounds(s) for s in members]
-                bounds = (np.min([b[0] for b in boxes], axis=0),
-                          np.max([b[1] for b in boxes], axis=0))
-                group_blocks = [_InstanceSetBlock(insts, child, bounds)]
-            else:
-                group_blocks = [_InstanceBlock(inst, child) for inst in insts]
-            for block in group_blocks:
-                block.base = sum(b.count for b in self.blocks)
-                self.blocks.append(block)
-                mids.append(np.tile(child_mid, block.count // max(child.count, 1)))
-                rads.append(np.zeros((block.count, 3), dtype=np.float32))
+            mids.append(mid)
+            rads.append(rad)
         self.count = sum(b.count for b in self.blocks)
         mid = np.concatenate(mids) if mids else np.zeros(1, dtype=np.uint32)
         rad = np.concatenate(rads) if rads else np.zeros((1, 3), dtype=np.float32)
         self.material_id = _u(mid if len(mid) else np.zeros(1, dtype=np.uint32))
         self.radiance = _v3(rad if len(rad) else np.zeros((1, 3), dtype=np.float32))
         #: whether a triangle mesh is among the blocks (top level only)
-        self.has_mesh = any(isinstance(b, _MeshBlock) for b in self.blocks)
+        self.has_mesh = any(isinstance(b, shapes_mesh.Block) for b in self.blocks)
         #: the shapes that emit light (area lights), top level only
-        self.emitters = [s for s in shapes if getattr(s, "emitter", None) is not None]
+        self.emitters = [s for s in members if getattr(s, "emitter", None) is not None]
 
     def closest_hit(self, o, d, tmax, active=True) -> Hit:
         """Nearest intersection of each ray in (0, tmax); inactive rays report a miss.

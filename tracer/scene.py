@@ -7,9 +7,11 @@ reference. Any input the contract calls bad is refused by :func:`load_scene`
 with a :class:`~tracer.errors.SceneError` naming the file, the key and what was
 expected, before anything renders.
 
-Each material and light kind is parsed by its own module (``tracer/materials/``,
-``tracer/emitters/``), found through their registries by the ``type`` key;
-this module reads the rest (film, camera, shapes, groups, ``[compare]``).
+Each material, light and shape kind is parsed by its own module
+(``tracer/materials/``, ``tracer/emitters/``, ``tracer/shapes/``), found through
+their registries by the ``type`` key; this module reads the rest (film, camera,
+groups, ``[compare]``, and what every shape has: ``type``, ``material``,
+``emitter``).
 
 Two lines load and render a scene::
 
@@ -19,12 +21,14 @@ Two lines load and render a scene::
 
 from __future__ import annotations
 
+import functools
 import math
+import operator
 import os
 import tomllib
 from dataclasses import dataclass, field, replace
 from pathlib import Path
-from typing import Any, ClassVar
+from typing import Any
 
 import numpy as np
 
@@ -35,6 +39,7 @@ from whitted.scenes import resolve as resolve_scene
 from whitted.tracer import emitters as _emitters
 from whitted.tracer import materials as _materials
 from whitted.tracer import settings_schema
+from whitted.tracer import shapes as _shapes
 from whitted.tracer import transform as tf
 from whitted.tracer.emitters import area as _area
 from whitted.tracer.emitters.area import AreaEmitter as AreaEmitter
@@ -58,14 +63,23 @@ from whitted.tracer.settings import (
     Vec3,
     as_tuple,
     check_distinct,
-    check_extent,
-    check_transform,
     norm,
-    norm_or_1,
     parse_steps,
-    read_points,
     show,
 )
+from whitted.tracer.shapes.base import Context as _ShapeContext
+from whitted.tracer.shapes.cube import Cube as Cube
+from whitted.tracer.shapes.cube import cube_mesh as cube_mesh
+from whitted.tracer.shapes.cylinder import Cylinder as Cylinder
+from whitted.tracer.shapes.cylinder import _mitsuba_frame as _mitsuba_frame
+from whitted.tracer.shapes.disk import Disk as Disk
+from whitted.tracer.shapes.instance import Instance as Instance
+from whitted.tracer.shapes.mesh import Mesh as Mesh
+from whitted.tracer.shapes.paraboloid import Paraboloid as Paraboloid
+from whitted.tracer.shapes.polygon import Polygon as Polygon
+from whitted.tracer.shapes.rectangle import Rectangle as Rectangle
+from whitted.tracer.shapes.sphere import Sphere as Sphere
+from whitted.tracer.shapes.triangle import Triangle as Triangle
 
 # ---------------------------------------------------------------------------
 # The model
@@ -163,170 +177,14 @@ Material = MaterialModel
 Light = LightModel
 
 
-@dataclass(frozen=True)
-class Sphere:
-    #: the kind, as Mitsuba's ``Shape::shape_type()`` says it (the scene's ``type``)
-    shape_type: ClassVar[str] = "sphere"
-    center: Vec3
-    radius: float
-    material: str | None
-    emitter: AreaEmitter | None = None
-    #: rotation of the sphere's own frame (its texture coordinates), row-major 3x3
-    rotation: Matrix = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
-
-    def to_world(self) -> np.ndarray:
-        """The whole placement as Mitsuba builds it: rotation, uniform scale, translation."""
-        m = np.eye(4)
-        m[:3, :3] = np.asarray(self.rotation) * self.radius
-        m[:3, 3] = self.center
-        return m
-
-
-@dataclass(frozen=True)
-class _Planar:
-    """A flat shape in local xy (normal +z) placed by ``to_world``."""
-    to_world: Matrix
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Centre and the images of local +x and +y (half-edges, or radii) in world space."""
-        m = np.asarray(self.to_world)
-        c = tf.apply_point(m, (0, 0, 0))
-        return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
-
-    def normal(self) -> np.ndarray:
-        """Mitsuba's orientation: the inverse transpose of to_world applied to +z."""
-        n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
-        return n / np.linalg.norm(n)
-
-
-@dataclass(frozen=True)
-class Rectangle(_Planar):
-    """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
-    shape_type: ClassVar[str] = "rectangle"
-
-
-@dataclass(frozen=True)
-class Triangle:
-    shape_type: ClassVar[str] = "triangle"
-    vertices: tuple[Vec3, Vec3, Vec3]  # world space, after to_world
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-
-@dataclass(frozen=True)
-class Disk(_Planar):
-    """Mitsuba's disk: the unit disk in local xy, normal +z, placed by ``to_world``."""
-    shape_type: ClassVar[str] = "disk"
-
-
-@dataclass(frozen=True)
-class Cylinder:
-    """Mitsuba's open cylinder from p0 to p1 with a radius, then ``to_world``."""
-    shape_type: ClassVar[str] = "cylinder"
-    p0: Vec3
-    p1: Vec3
-    radius: float
-    to_world: Matrix
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-    def local_to_world(self) -> np.ndarray:
-        """Unit cylinder x^2 + y^2 = 1, 0 <= z <= 1 to world, composed as Mitsuba does."""
-        d = np.subtract(self.p1, self.p0)
-        length = float(np.linalg.norm(d))
-        frame = np.eye(4)
-        s_, t_ = _mitsuba_frame(d / length)
-        frame[:3, 0], frame[:3, 1], frame[:3, 2] = s_, t_, d / length
-        return (np.asarray(self.to_world) @ tf.translate(self.p0) @ frame
-                @ tf.scale((self.radius, self.radius, length)))
-
-
-@dataclass(frozen=True)
-class Paraboloid:
-    """z = x^2 / a^2 + y^2 / b^2 for 0 <= z <= height in local space, placed by ``to_world``."""
-    shape_type: ClassVar[str] = "paraboloid"
-    a: float
-    b: float
-    height: float
-    to_world: Matrix
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-
-@dataclass(frozen=True)
-class Polygon:
-    """A planar polygon (convex or not), vertices in world space after ``to_world``."""
-    shape_type: ClassVar[str] = "polygon"
-    vertices: tuple[Vec3, ...]
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class Mesh:
-    """A triangle mesh from an OBJ or PLY file, in world space after ``to_world``."""
-    shape_type: ClassVar[str] = "mesh"
-    file: str
-    smooth: bool
-    vertices: np.ndarray       # (V, 3) world space
-    faces: np.ndarray          # (F, 3)
-    normals: np.ndarray | None  # (V, 3) world space, unit; None: face normals
-    uvs: np.ndarray | None     # (V, 2)
-    to_world: Matrix
-    material: str | None
-    emitter: AreaEmitter | None = None
-
-
-@dataclass(frozen=True)
-class Instance:
-    """A group of shapes placed by ``to_world`` (the group's own shapes are in object space)."""
-    shape_type: ClassVar[str] = "instance"
-    group: str
-    to_world: Matrix
-    material: str | None = None
-    emitter: AreaEmitter | None = None
-
-
-@dataclass(frozen=True, eq=False)
-class Cube(Mesh):
-    """Mitsuba's ``cube``: [-1, 1]^3 as 12 flat triangles, placed by ``to_world``."""
-    shape_type: ClassVar[str] = "cube"
-
-
-def cube_mesh() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(vertices, faces, uvs) of [-1, 1]^3: four vertices a face, faces wound outwards.
-
-    The same surface as Mitsuba's ``cube`` (a mesh of 24 vertices and 12 triangles
-    with face normals); each face's uv spans [0, 1]^2.
-    """
-    verts, faces, uvs = [], [], []
-    for axis in range(3):
-        for sign in (-1.0, 1.0):
-            u_ax, v_ax = (axis + 1) % 3, (axis + 2) % 3
-            base = len(verts)
-            for a, b in ((-1, -1), (1, -1), (1, 1), (-1, 1)):
-                p = [0.0, 0.0, 0.0]
-                p[axis], p[u_ax], p[v_ax] = sign, a * sign, b
-                verts.append(p)
-                uvs.append(((a + 1) / 2, (b + 1) / 2))
-            # (u x v) = +axis; flipping u on the negative face keeps the winding outward
-            faces += [[base, base + 1, base + 2], [base, base + 2, base + 3]]
-    return np.asarray(verts), np.asarray(faces), np.asarray(uvs)
-
-
-Shape = (Sphere | Rectangle | Triangle | Disk | Cylinder | Paraboloid | Polygon | Mesh
-         | Instance)
-
-
-def _mitsuba_frame(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The tangents Mitsuba's Frame3f(n) chooses (Duff et al. 2017), so that uv agree."""
-    sign = 1.0 if n[2] >= 0 else -1.0
-    a = -1.0 / (sign + n[2])
-    b = n[0] * n[1] * a
-    return (np.array([1 + sign * n[0] * n[0] * a, sign * b, -sign * n[0]]),
-            np.array([b, sign + n[1] * n[1] * a, -n[1]]))
+# Shapes: one module per kind (tracer/shapes/), found through its registry; the kinds
+# that were defined here are re-exported above. ``Shape``: the union of the registered
+# kinds' models (a kind whose model derives from another's, a cube from a mesh, is in it
+# through that one).
+Shape = functools.reduce(operator.or_, [
+    m.MODEL for m in _shapes.REGISTRY.values()
+    if not any(o.MODEL is not m.MODEL and issubclass(m.MODEL, o.MODEL)
+               for o in _shapes.REGISTRY.values())])
 
 
 @dataclass(frozen=True)
@@ -399,8 +257,7 @@ class Scene:
         """Primitives the tracer builds tables for: triangles of meshes, shapes, instances'
         copies (:func:`tracer.limits.check_render` bounds it)."""
         def count(shapes) -> int:
-            return sum(len(s.faces) if isinstance(s, Mesh) else 1 for s in shapes
-                       if not isinstance(s, Instance))
+            return sum(s.primitive_count() for s in shapes if not isinstance(s, Instance))
 
         per_group = {g: count(members) for g, members in self.groups.items()}
         return count(self.shapes) + sum(per_group[s.group] for s in self.shapes
@@ -431,7 +288,7 @@ class Scene:
 
     def has_tessellated(self) -> bool:
         """Shapes Mitsuba lacks, which the conversion tessellates (paraboloids)."""
-        return any(isinstance(s, Paraboloid) for s in self.all_shapes())
+        return any(s.tessellated for s in self.all_shapes())
 
 
 # ---------------------------------------------------------------------------
@@ -439,12 +296,12 @@ class Scene:
 # ---------------------------------------------------------------------------
 
 
-SHAPE_TYPES = ("sphere", "rectangle", "triangle", "disk", "cylinder", "paraboloid", "polygon",
-               "mesh", "cube", "instance")
+#: Shape ``type``s: the registry of tracer/shapes/.
+SHAPE_TYPES = tuple(_shapes.REGISTRY)
 #: Material ``type``s: the registry of tracer/materials/.
 MATERIAL_TYPES = tuple(_materials.REGISTRY)
-#: Shapes that may carry an area emitter (the tracer samples them): tracer/emitters/area.py.
-EMITTER_SHAPES = tuple(_area.SAMPLERS)
+#: Shapes that may carry an area emitter (their kind's module has a ``Sampler``).
+EMITTER_SHAPES = _shapes.emitting()
 #: ``[[lights]]`` ``type``s: the registry of tracer/emitters/.
 LIGHT_TYPES = tuple(_emitters.LIGHTS)
 CAMERA_TYPES = ("perspective", "orthographic")
@@ -739,20 +596,17 @@ def _parse_light(t: Table) -> Light:
 def _parse_shape(t: Table, materials: dict[str, Material], groups: dict,
                  base: Path, in_group: bool = False) -> Shape:
     kind = t.string("type", choices=SHAPE_TYPES)
-    if in_group and kind == "instance":
-        t.fail("type", "a group may not contain instances (nested instancing is not supported)")
+    module = _shapes.REGISTRY[kind]
+    if in_group and module.MODEL.not_in_groups:
+        t.fail("type", module.MODEL.not_in_groups)
     emitter = None
     if t.has("emitter"):
-        if kind not in _area.SAMPLERS or in_group:
-            t.fail("emitter", "area lights are supported on " + ", ".join(_area.SAMPLERS) +
+        if kind not in EMITTER_SHAPES or in_group:
+            t.fail("emitter", "area lights are supported on " + ", ".join(EMITTER_SHAPES) +
                    (" outside groups" if in_group else "") + f", not on a {kind}")
         emitter = t.table("emitter", parse=_parse_emitter)
-    if kind == "instance":
-        material = None
-        group = t.string("group")
-        if group not in groups:
-            known = ", ".join(sorted(groups)) or "none"
-            t.fail("group", f'unknown group "{group}" (defined: {known})')
+    if not module.MODEL.takes_material:
+        material = None  # an instance: its group's shapes carry the materials
     elif emitter is None or t.has("material"):
         material = t.string("material")
         if material not in materials:
@@ -760,65 +614,8 @@ def _parse_shape(t: Table, materials: dict[str, Material], groups: dict,
             t.fail("material", f'unknown material "{material}" (defined: {known})')
     else:
         material = None  # a pure emitter: black, reflects nothing
-    m = parse_steps(t, "to_world")
-    if kind == "sphere":
-        center = np.asarray(t.vec3("center", [0.0, 0.0, 0.0]))
-        radius = t.number("radius", 1.0, lo=0, lo_open=True)
-        if not tf.is_similarity(m) or np.linalg.det(m[:3, :3]) < 0:
-            t.fail("to_world", "a sphere takes only translations, rotations and uniform "
-                               "positive scales (the result must stay a sphere)")
-        scale = float(np.linalg.norm(m[:3, 0]))
-        shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
-                       material, emitter, as_tuple(m[:3, :3] / scale))
-        check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
-    elif kind == "rectangle":
-        shape = Rectangle(as_tuple(m), material, emitter)
-    elif kind == "disk":
-        shape = Disk(as_tuple(m), material, emitter)
-    elif kind == "triangle":
-        verts = read_points(t, "vertices", m, exactly=3)
-        e1, e2 = verts[1] - verts[0], verts[2] - verts[0]
-        # Relative: the sine of the angle between the edges, as float32 can resolve it.
-        if not norm(np.cross(e1 / norm_or_1(e1), e2 / norm_or_1(e2))) > 2.0**-23:
-            t.fail("vertices", "expected a triangle with non-zero area "
-                               "(the vertices are collinear, or nearly so for float32)")
-        shape = Triangle(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
-    elif kind == "polygon":
-        verts = read_points(t, "vertices", m)
-        _check_polygon(t, verts)
-        shape = Polygon(tuple(tuple(float(x) for x in p) for p in verts), material, emitter)
-    elif kind == "cylinder":
-        p0, p1 = t.vec3("p0", [0.0, 0.0, 0.0]), t.vec3("p1", [0.0, 0.0, 1.0])
-        t.distinct("p1", p0, p1, "p0")
-        shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), as_tuple(m),
-                         material, emitter)
-        check_transform(t, "radius", shape.local_to_world(),
-                         "placement (radius against length)")
-        lin = shape.local_to_world()[:3, :3]
-        x, y, z = lin[:, 0], lin[:, 1], lin[:, 2]
-        tol = 1e-6 * max(np.linalg.norm(x), np.linalg.norm(z))
-        if (abs(np.dot(x, y)) > tol * np.linalg.norm(y) or abs(np.dot(x, z)) > tol *
-                np.linalg.norm(z) or abs(np.dot(y, z)) > tol * np.linalg.norm(z) or
-                abs(np.linalg.norm(x) - np.linalg.norm(y)) > tol or np.linalg.det(lin) < 0):
-            t.fail("to_world", "a cylinder's to_world may not shear it, mirror it or scale its "
-                               "cross-section unevenly (Mitsuba's cylinder does not support it)")
-    elif kind == "paraboloid":
-        shape = Paraboloid(t.number("a", 1.0, lo=0, lo_open=True),
-                           t.number("b", 1.0, lo=0, lo_open=True),
-                           t.number("height", 1.0, lo=0, lo_open=True), as_tuple(m),
-                           material, emitter)
-        h = math.sqrt(shape.height)
-        check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
-                         "shape (a, b and height against each other)")
-    elif kind == "mesh":
-        shape = _parse_mesh(t, m, material, emitter, base)
-    elif kind == "cube":
-        verts, faces, uvs = cube_mesh()
-        world = tf.apply_point(m, verts)
-        check_extent(t, "to_world", world, "vertices")
-        shape = Cube("cube", False, world, faces, None, uvs, as_tuple(m), material, emitter)
-    else:
-        shape = Instance(group, as_tuple(m))
+    ctx = _ShapeContext(t, material, emitter, materials, groups, base, in_group)
+    shape = module.parse(t, ctx)
     if material is not None:  # a material may make a light of its shape (light_of)
         try:
             light = materials[material].light_of(shape)
@@ -829,46 +626,3 @@ def _parse_shape(t: Table, materials: dict[str, Material], groups: dict,
                                "lights cannot be instanced (use it outside groups)")
     t.finish()
     return shape
-
-
-def _check_polygon(t: Table, verts: list) -> None:
-    """Planar, not degenerate and simple (no edge crosses another)."""
-    from whitted.tracer.shapes.polygon import plane_frame, self_intersects
-
-    pts = np.asarray(verts)
-    frame = plane_frame(pts)
-    if frame is None:
-        t.fail("vertices", "expected a polygon with non-zero area")
-    origin, u, v, n = frame
-    size = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))
-    off = np.abs((pts - origin) @ n)
-    if off.max() > 1e-6 * size:
-        t.fail("vertices", f"expected a planar polygon (a vertex lies {off.max():.3g} "
-                           "off the plane of the others)")
-    if self_intersects((pts - origin) @ np.stack([u, v], axis=1)):
-        t.fail("vertices", "expected a simple polygon (two of its edges cross)")
-
-
-def _parse_mesh(t: Table, m: np.ndarray, material, emitter, base: Path) -> Mesh:
-    from whitted.tracer.meshio import MeshError, compute_vertex_normals, load_mesh
-
-    name = t.string("file")
-    path = Path(name) if Path(name).is_absolute() else base / name
-    if not path.exists():  # a FIFO, device or folder: load_mesh says what it is
-        t.fail("file", f"no such mesh file: {path}")
-    smooth = t.boolean("smooth", True)
-    try:
-        data = load_mesh(path)
-    except MeshError as e:
-        t.fail("file", str(e))
-    verts = tf.apply_point(m, data.vertices)
-    check_extent(t, "file", verts, "vertices")
-    normals = None
-    if smooth:
-        if data.normals is not None:  # normals transform by the inverse transpose
-            normals = tf.apply_normal(m, data.normals)
-        else:  # as Mitsuba does: from the faces, after to_world
-            normals = compute_vertex_normals(verts, data.faces)
-        normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
-    return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
-                as_tuple(m), material, emitter)

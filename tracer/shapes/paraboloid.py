@@ -11,7 +11,20 @@ from the bowl's inside (down and out); to world space by the inverse
 transpose of to_world.
 """
 
-import drjit as dr
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
+
+from whitted.tracer import transform as tf
+from whitted.tracer.backend import deferred
+from whitted.tracer.settings import Matrix, Table, as_tuple, check_transform
+from whitted.tracer.shapes import base
+
+dr = deferred("drjit")
 
 
 def intersect(o, d, inv_a2, inv_b2, height, tmax):
@@ -48,3 +61,62 @@ def uv(p, a, b, height):
     phi = dr.atan2(p.y / b, p.x / a)
     phi = dr.select(phi < 0, phi + 2 * math.pi, phi)
     return r, phi * (0.5 / math.pi)
+
+
+# --------------------------------------------------------------------------- the kind
+
+
+@dataclass(frozen=True)
+class Paraboloid(base.ShapeModel):
+    """z = x^2 / a^2 + y^2 / b^2 for 0 <= z <= height in local space, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "paraboloid"
+    tessellated: ClassVar[bool] = True   # Mitsuba has no paraboloid
+    a: float
+    b: float
+    height: float
+    to_world: Matrix
+    material: str | None
+    emitter: Any = None   # always None: no sampler, so no area emitter
+
+
+MODEL = Paraboloid
+
+
+def parse(t: Table, ctx: base.Context) -> Paraboloid:
+    m = ctx.to_world()
+    shape = Paraboloid(t.number("a", 1.0, lo=0, lo_open=True),
+                       t.number("b", 1.0, lo=0, lo_open=True),
+                       t.number("height", 1.0, lo=0, lo_open=True), as_tuple(m),
+                       ctx.material, ctx.emitter)
+    h = math.sqrt(shape.height)
+    check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
+                    "shape (a, b and height against each other)")
+    return shape
+
+
+def bounds(shape) -> tuple[np.ndarray, np.ndarray]:
+    s = np.sqrt(shape.height)
+    return base.box_corners(shape.to_world, (-shape.a * s, -shape.b * s, 0),
+                            (shape.a * s, shape.b * s, shape.height))
+
+
+class Block(base.LocalBlock):
+    """Paraboloids, each intersected in its own local space (unrolled)."""
+
+    @staticmethod
+    def matrix(shape) -> np.ndarray:
+        return np.asarray(shape.to_world)
+
+    @staticmethod
+    def extra(shape):
+        return (1 / shape.a ** 2, 1 / shape.b ** 2, shape.height, shape.a, shape.b)
+
+    def local_test(self, ol, dl, t, extra):
+        ia2, ib2, h, _, _ = extra
+        return intersect(ol, dl, ia2, ib2, h, t)
+
+    def local_surface(self, local, extra):
+        ia2, ib2, h, a, b = extra
+        grad = gradient(local, ia2, ib2)
+        u, v = uv(local, a, b, h)
+        return local, grad, u, v

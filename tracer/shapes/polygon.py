@@ -10,8 +10,18 @@ inside (Haines, "Point in Polygon Strategies", Graphics Gems IV, 1994). It
 holds for convex and non-convex simple polygons alike.
 """
 
-import drjit as dr
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import numpy as np
+
+from whitted.tracer.backend import deferred, jit
+from whitted.tracer.settings import Table, Vec3, read_points
+from whitted.tracer.shapes import base, mesh
+
+dr = deferred("drjit")
 
 
 def newell_normal(pts: np.ndarray) -> np.ndarray:
@@ -119,3 +129,92 @@ def ear_clip(pts2: np.ndarray) -> list[tuple[int, int, int]]:
     if len(idx) == 3:
         tris.append((idx[0], idx[1], idx[2]))
     return tris
+
+
+# --------------------------------------------------------------------------- the kind
+
+
+@dataclass(frozen=True)
+class Polygon(base.ShapeModel):
+    """A planar polygon (convex or not), vertices in world space after ``to_world``."""
+    shape_type: ClassVar[str] = "polygon"
+    vertices: tuple[Vec3, ...]
+    material: str | None
+    emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+
+
+MODEL = Polygon
+
+
+def parse(t: Table, ctx: base.Context) -> Polygon:
+    verts = read_points(t, "vertices", ctx.to_world())
+    _check_polygon(t, verts)
+    return Polygon(tuple(tuple(float(x) for x in p) for p in verts), ctx.material,
+                   ctx.emitter)
+
+
+def _check_polygon(t: Table, verts: list) -> None:
+    """Planar, not degenerate and simple (no edge crosses another)."""
+    pts = np.asarray(verts)
+    frame = plane_frame(pts)
+    if frame is None:
+        t.fail("vertices", "expected a polygon with non-zero area")
+    origin, u, v, n = frame
+    size = float(np.max(np.linalg.norm(pts - pts.mean(axis=0), axis=1)))
+    off = np.abs((pts - origin) @ n)
+    if off.max() > 1e-6 * size:
+        t.fail("vertices", f"expected a planar polygon (a vertex lies {off.max():.3g} "
+                           "off the plane of the others)")
+    if self_intersects((pts - origin) @ np.stack([u, v], axis=1)):
+        t.fail("vertices", "expected a simple polygon (two of its edges cross)")
+
+
+def bounds(shape) -> tuple[np.ndarray, np.ndarray]:
+    return base.box_of(shape.vertices)
+
+
+class Block(base.Block):
+    """Each polygon unrolled: its plane and its 2D outline as kernel constants."""
+
+    def __init__(self, polys: list[Polygon]):
+        self.count = len(polys)
+        self.items = []
+        for poly in polys:
+            pts = np.asarray(poly.vertices, dtype=np.float64)
+            origin, u, v, n = plane_frame(pts)
+            xy = (pts - origin) @ np.stack([u, v], axis=1)
+            self.items.append((origin, u, v, n, [float(x) for x in xy[:, 0]],
+                               [float(y) for y in xy[:, 1]]))
+
+    def test(self, o, d, t, i):
+        origin, u, v, n, xs, ys = self.items[i]
+        c3 = base.const3
+        ti, hit, _, _ = intersect(o, d, c3(origin), c3(n), c3(u), c3(v), xs, ys, t)
+        return ti, hit
+
+    def intersect(self, o, d, t, prim, active):
+        return self._unrolled(o, d, t, prim)
+
+    def surface(self, k, o, d, t, mask):
+        c3 = base.const3
+        p = dr.fma(d, t, o)
+        n = dr.zeros(jit.Array3f, dr.width(p))
+        uv = dr.zeros(jit.Array2f, dr.width(p))
+        for i, (origin, u, v, nn, _, _) in enumerate(self.items):
+            sel = mask & (k == i)
+            rel = p - c3(origin)
+            n = dr.select(sel, c3(nn), n)
+            # The plane's own 2D coordinates (the conversion gives Mitsuba the same uvs).
+            uv = dr.select(sel, jit.Array2f(dr.dot(rel, c3(u)), dr.dot(rel, c3(v))), uv)
+        return p, n, n, uv
+
+
+class Sampler(mesh.Sampler):
+    """A polygon, by the ear-clipped triangles the Mitsuba conversion gives Mitsuba too."""
+
+    @staticmethod
+    def triangles(shape):
+        pts = np.asarray(shape.vertices, dtype=np.float64)
+        origin, u, v, _ = plane_frame(pts)
+        xy = (pts - origin) @ np.stack([u, v], axis=1)
+        return pts, np.asarray(ear_clip(xy))

@@ -9,10 +9,21 @@ U* = (V x m) / |m|^2, V* = (m x U) / |m|^2 with m = U x V, for which
 U*.U = V*.V = 1 and U*.V = V*.U = 0, so shear is handled too.
 """
 
-import drjit as dr
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
 import numpy as np
 
 from whitted.tracer import faults
+from whitted.tracer import transform as tf
+from whitted.tracer.backend import deferred, jit
+from whitted.tracer.settings import Matrix, Table, as_tuple
+from whitted.tracer.shapes import base
+
+dr = deferred("drjit")
+lights = deferred("whitted.tracer.lights")
 
 
 def frame(center, u, v):
@@ -42,3 +53,96 @@ def intersect(o, d, center, n, u_dual, v_dual, tmax):
 def uv(a, b):
     """Texture coordinates as Mitsuba's rectangle defines them: (a, b) mapped to [0, 1]^2."""
     return dr.fma(a, 0.5, 0.5), dr.fma(b, 0.5, 0.5)
+
+
+# --------------------------------------------------------------------------- the kind
+
+
+@dataclass(frozen=True)
+class Planar(base.ShapeModel):
+    """A flat shape in local xy (normal +z) placed by ``to_world``."""
+    to_world: Matrix
+    material: str | None
+    emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+
+    def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Centre and the images of local +x and +y (half-edges, or radii) in world space."""
+        m = np.asarray(self.to_world)
+        c = tf.apply_point(m, (0, 0, 0))
+        return c, tf.apply_point(m, (1, 0, 0)) - c, tf.apply_point(m, (0, 1, 0)) - c
+
+    def normal(self) -> np.ndarray:
+        """Mitsuba's orientation: the inverse transpose of to_world applied to +z."""
+        n = tf.apply_normal(np.asarray(self.to_world), (0, 0, 1))
+        return n / np.linalg.norm(n)
+
+
+@dataclass(frozen=True)
+class Rectangle(Planar):
+    """Mitsuba's rectangle: [-1, 1]^2 in local xy, normal +z, placed by ``to_world``."""
+    shape_type: ClassVar[str] = "rectangle"
+
+
+MODEL = Rectangle
+
+
+def parse(t: Table, ctx: base.Context) -> Rectangle:
+    return Rectangle(as_tuple(ctx.to_world()), ctx.material, ctx.emitter)
+
+
+def bounds(shape: Planar) -> tuple[np.ndarray, np.ndarray]:
+    return base.box_corners(shape.to_world, (-1, -1, 0), (1, 1, 0))
+
+
+class Block(base.TableBlock):
+    """Rectangles (or disks, :class:`tracer.shapes.disk.Block`): a centre, two axes (as a
+    dual basis) and a normal."""
+    fields = ("c", "n", "ud", "vd")
+    #: the inside test and the texture coordinates of the kind
+    hit_formula = staticmethod(intersect)
+    uv_formula = staticmethod(uv)
+
+    def __init__(self, shapes):
+        self.count = len(shapes)
+        frames = [s.corners() for s in shapes]
+        duals = [frame(c, u, v) for c, u, v in frames]
+        self.c = base.v3([c for c, _, _ in frames])
+        self.n = base.v3([s.normal() for s in shapes])  # Mitsuba's: inverse transpose of +z
+        self.ud = base.v3([ud for _, ud, _ in duals])
+        self.vd = base.v3([vd for _, _, vd in duals])
+        self._constants()
+
+    def test(self, o, d, t, i):
+        ti, hit, _, _ = self.hit_formula(o, d, self.get("c", i), self.get("n", i),
+                                         self.get("ud", i), self.get("vd", i), t)
+        return ti, hit
+
+    def surface(self, k, o, d, t, mask):
+        c, n = self.get("c", k, mask), self.get("n", k, mask)
+        p = dr.fma(d, t, o)
+        p = p - dr.dot(p - c, n) * n  # re-project onto the plane
+        rel = p - c
+        a = dr.dot(rel, self.get("ud", k, mask))
+        b = dr.dot(rel, self.get("vd", k, mask))
+        uv = jit.Array2f(*self.uv_formula(a, b))
+        return p, n, n, uv
+
+
+class Sampler(base.FlatSampler):
+    """Mitsuba's rectangle [-1, 1]^2 under to_world: a parallelogram of area 4 |u x v|."""
+
+    def __init__(self, shape):
+        c, u, v = shape.corners()
+        self.center, self.u, self.v = base.const3(c), base.const3(u), base.const3(v)
+        self.n = base.const3(shape.normal())
+        self.area = self.local_area() * float(np.linalg.norm(np.cross(u, v)))
+
+    @staticmethod
+    def local_area() -> float:
+        """Area of the local shape: the square [-1, 1]^2."""
+        if faults.on("area-pdf-rectangle"):
+            return 1.0   # the unit square taken for Mitsuba's [-1, 1]^2
+        return 4.0
+
+    def point(self, u):
+        return lights.sample_parallelogram(u, self.center, self.u, self.v)

@@ -14,9 +14,21 @@ The surface normal is the normalised gradient of the implicit function,
 grad(|p - c|^2 - r^2) / 2 = p - c, divided by r.
 """
 
-import drjit as dr
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar
+
+import numpy as np
 
 from whitted.tracer import faults
+from whitted.tracer import transform as tf
+from whitted.tracer.backend import deferred, jit, syntax
+from whitted.tracer.settings import Matrix, Table, Vec3, as_tuple, check_transform
+from whitted.tracer.shapes import base
+
+dr = deferred("drjit")
+lights = deferred("whitted.tracer.lights")
 
 
 def quadratic(o, d, center, radius, unit: bool = True):
@@ -106,3 +118,140 @@ def occludes(o, d, center, radius, tmax):
 def normal(p, center, radius):
     """Outward unit normal: the gradient of |p - c|^2 - r^2, normalised."""
     return (p - center) / radius
+
+
+# --------------------------------------------------------------------------- the kind
+
+
+@dataclass(frozen=True)
+class Sphere(base.ShapeModel):
+    shape_type: ClassVar[str] = "sphere"
+    center: Vec3
+    radius: float
+    material: str | None
+    emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    #: rotation of the sphere's own frame (its texture coordinates), row-major 3x3
+    rotation: Matrix = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+
+    def to_world(self) -> np.ndarray:
+        """The whole placement as Mitsuba builds it: rotation, uniform scale, translation."""
+        m = np.eye(4)
+        m[:3, :3] = np.asarray(self.rotation) * self.radius
+        m[:3, 3] = self.center
+        return m
+
+
+MODEL = Sphere
+
+
+def parse(t: Table, ctx: base.Context) -> Sphere:
+    m = ctx.to_world()
+    center = np.asarray(t.vec3("center", [0.0, 0.0, 0.0]))
+    radius = t.number("radius", 1.0, lo=0, lo_open=True)
+    if not tf.is_similarity(m) or np.linalg.det(m[:3, :3]) < 0:
+        t.fail("to_world", "a sphere takes only translations, rotations and uniform "
+                           "positive scales (the result must stay a sphere)")
+    scale = float(np.linalg.norm(m[:3, 0]))
+    shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
+                   ctx.material, ctx.emitter, as_tuple(m[:3, :3] / scale))
+    check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
+    return shape
+
+
+def bounds(shape: Sphere) -> tuple[np.ndarray, np.ndarray]:
+    c = np.asarray(shape.center, dtype=np.float64)
+    return c - shape.radius, c + shape.radius
+
+
+class Block(base.TableBlock):
+    fields = ("c", "r")
+
+    def __init__(self, spheres: list[Sphere]):
+        self.count = len(spheres)
+        self.c = base.v3([s.center for s in spheres])
+        self.r = base.floats([s.radius for s in spheres])
+        # Rows of each sphere's inverse rotation (its local frame, for uv).
+        rot = np.asarray([np.asarray(s.rotation) for s in spheres])  # (N, 3, 3)
+        self.r0, self.r1, self.r2 = (base.v3(rot[:, :, k]) for k in range(3))
+        self._constants()
+
+    def test(self, o, d, t, i):
+        return intersect(o, d, self.get("c", i), self.get("r", i), t)
+
+    def _unrolled(self, o, d, t, prim):
+        """The nearest sphere, the roots compared as fractions and the nearest divided
+        once (:func:`nearest_fraction`): one division a ray, not one a sphere (a vector
+        division and a square root each take the one divider unit for many cycles). t
+        is :meth:`test`'s for the sphere found, and that sphere is :meth:`test`'s but
+        where two spheres' roots are within rounding of each other."""
+        num, den = t, jit.Float(1.0)
+        for i in range(self.count):
+            n_i, d_i, hit = nearest_fraction(o, d, self.get("c", i), self.get("r", i))
+            closer = hit & (n_i * den < num * d_i)   # n_i / d_i < num / den, dens > 0
+            num = dr.select(closer, n_i, num)
+            den = dr.select(closer, d_i, den)
+            prim = dr.select(closer, i + self.base, prim)
+        return num / den, prim
+
+    any_hit = True
+
+    def occluded(self, o, d, tmax, active):
+        """Any sphere with a root in (0, tmax) (:func:`occludes`: no division); many
+        spheres in a loop that stops at the first."""
+        if self.count > base.UNROLL:
+            return self._occluded_looped(o, d, tmax, active)
+        hit = dr.zeros(jit.Bool, dr.width(tmax))
+        for i in range(self.count):
+            hit |= occludes(o, d, self.get("c", i), self.get("r", i), tmax)
+        return hit
+
+    @syntax
+    def _occluded_looped(self, o, d, tmax, active):
+        i = jit.UInt32(0)
+        hit = dr.zeros(jit.Bool, dr.width(tmax))
+        count = dr.opaque(jit.UInt32, self.count)
+        while active & ~hit & (i < count):
+            hit = occludes(o, d, self.get("c", i), self.get("r", i), tmax)
+            i += 1
+        return hit
+
+    def surface(self, k, o, d, t, mask):
+        c = self.get("c", k, mask)
+        r = self.get("r", k, mask)
+        p = dr.fma(d, t, o)
+        n = dr.normalize(p - c)
+        p = dr.fma(n, r, c)  # re-project onto the sphere: the error stays relative to r
+        if faults.on("unnormalized-normal"):
+            n = n * r   # the gradient p - c, not divided by r
+        # Local direction R^T n (columns of R are the local axes in world space).
+        local = jit.Array3f(dr.dot(dr.gather(jit.Array3f, self.r0, k, mask), n),
+                            dr.dot(dr.gather(jit.Array3f, self.r1, k, mask), n),
+                            dr.dot(dr.gather(jit.Array3f, self.r2, k, mask), n))
+        phi = dr.atan2(local.y, local.x)
+        phi = dr.select(phi < 0, phi + 2 * dr.pi, phi)
+        uv = jit.Array2f(phi * (0.5 / dr.pi), dr.acos(dr.clip(local.z, -1, 1)) / dr.pi)
+        return p, n, n, uv
+
+
+class Sampler:
+    """A sphere sampled uniformly in the cone of directions it subtends (solid angle)."""
+    aim = (0.0, 0.0)  # the cone's axis: towards the centre
+
+    def __init__(self, shape):
+        self.center, self.radius = base.const3(shape.center), float(shape.radius)
+
+    def sample(self, radiance, p, origin, u):
+        to_c = self.center - p
+        dc = dr.norm(to_c)
+        outside = dc > self.radius
+        sin2_max = dr.minimum((self.radius * self.radius) / (dc * dc), 1)
+        cos_max = dr.sqrt(1 - sin2_max)
+        # 1 - cos_max without cancellation, for small and distant spheres
+        x, y, z, pdf = lights.sample_cone(u, cos_max, sin2_max / (1 + cos_max))
+        w = to_c / dc
+        t1, t2 = lights.coordinate_system(w)
+        wi = dr.normalize(x * t1 + y * t2 + z * w)
+        t0, _, real = roots(origin, wi, self.center, self.radius)
+        # A grazing sample can miss by rounding: take the tangent distance then.
+        dist = dr.select(real & (t0 > 0), t0, dr.dot(self.center - origin, wi))
+        return wi, dist, dr.select(outside, radiance / pdf, 0)

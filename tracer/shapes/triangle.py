@@ -52,11 +52,18 @@ depths scaled by S_z = 1 / d_kz: in units of |d|, like the other shapes' t.
 
 from __future__ import annotations
 
-from typing import NamedTuple
+from dataclasses import dataclass
+from typing import Any, ClassVar, NamedTuple
 
-import drjit as dr
+import numpy as np
 
 from whitted.tracer import faults
+from whitted.tracer.backend import deferred, jit
+from whitted.tracer.settings import Table, Vec3, norm, norm_or_1, read_points
+from whitted.tracer.shapes import base
+
+dr = deferred("drjit")
+lights = deferred("whitted.tracer.lights")
 
 
 class RaySpace(NamedTuple):
@@ -147,3 +154,74 @@ def interpolate(beta, gamma, a0, a1, a2):
     if faults.on("barycentrics-swapped"):
         beta, gamma = gamma, beta
     return a0 * (1 - beta - gamma) + a1 * beta + a2 * gamma
+
+
+# --------------------------------------------------------------------------- the kind
+
+
+@dataclass(frozen=True)
+class Triangle(base.ShapeModel):
+    shape_type: ClassVar[str] = "triangle"
+    vertices: tuple[Vec3, Vec3, Vec3]  # world space, after to_world
+    material: str | None
+    emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+
+
+MODEL = Triangle
+
+
+def parse(t: Table, ctx: base.Context) -> Triangle:
+    verts = read_points(t, "vertices", ctx.to_world(), exactly=3)
+    e1, e2 = verts[1] - verts[0], verts[2] - verts[0]
+    # Relative: the sine of the angle between the edges, as float32 can resolve it.
+    if not norm(np.cross(e1 / norm_or_1(e1), e2 / norm_or_1(e2))) > 2.0**-23:
+        t.fail("vertices", "expected a triangle with non-zero area "
+                           "(the vertices are collinear, or nearly so for float32)")
+    return Triangle(tuple(tuple(float(x) for x in p) for p in verts), ctx.material,
+                    ctx.emitter)
+
+
+def bounds(shape) -> tuple[np.ndarray, np.ndarray]:
+    return base.box_of(shape.vertices)
+
+
+class Block(base.TableBlock):
+    # The corners themselves (not p0 and two edges): a vertex that two triangles share
+    # is then the same float32 point in both, which the watertight test needs.
+    fields = ("p0", "p1", "p2")
+
+    def __init__(self, tris: list[Triangle]):
+        self.count = len(tris)
+        v = np.asarray([t.vertices for t in tris], dtype=np.float64)
+        self.p0, self.p1, self.p2 = (base.v3(v[:, k]) for k in range(3))
+        n = np.cross(v[:, 1] - v[:, 0], v[:, 2] - v[:, 0])
+        self.n = base.v3(n / np.linalg.norm(n, axis=1, keepdims=True))
+        self._constants()
+
+    def test(self, o, d, t, i):
+        ti, hit, _, _ = intersect(o, d, self.get("p0", i), self.get("p1", i),
+                                  self.get("p2", i), t)
+        return ti, hit
+
+    def surface(self, k, o, d, t, mask):
+        n = dr.gather(jit.Array3f, self.n, k, mask)
+        p0, p1, p2 = (dr.gather(jit.Array3f, getattr(self, f), k, mask) for f in self.fields)
+        _, _, beta, gamma = intersect(o, d, p0, p1, p2, dr.inf)
+        # Mitsuba's mesh without texture coordinates: uv = (beta, gamma).
+        return dr.fma(d, t, o), n, n, jit.Array2f(beta, gamma)
+
+
+class Sampler(base.FlatSampler):
+    """A triangle of area |e1 x e2| / 2, sampled by the square-root warp."""
+    aim = (4 / 9, 0.5)  # barycentrics (1/3, 1/3): the centroid
+
+    def __init__(self, shape):
+        p = np.asarray(shape.vertices)
+        self.p0 = base.const3(p[0])
+        self.e1, self.e2 = base.const3(p[1] - p[0]), base.const3(p[2] - p[0])
+        n = np.cross(p[1] - p[0], p[2] - p[0])
+        self.n = base.const3(n / np.linalg.norm(n))
+        self.area = 0.5 * float(np.linalg.norm(n))
+
+    def point(self, u):
+        return lights.sample_triangle(u, self.p0, self.e1, self.e2)

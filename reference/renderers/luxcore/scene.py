@@ -62,25 +62,18 @@ import numpy as np
 from whitted.reference.emitters import area as area_conv
 from whitted.reference.emitters import convert as convert_light
 from whitted.reference.materials import convert as convert_material
-from whitted.reference.renderers.mitsuba.scene import paraboloid_mesh, polygon_mesh
+from whitted.reference.shapes import luxcore_mesh
+
+# Shapes convert in their own modules (reference/shapes/), through its registry; the
+# tessellations that used to be here are re-exported ("X as X").
+from whitted.reference.shapes.cylinder import cylinder_mesh as cylinder_mesh
+from whitted.reference.shapes.disk import disk_mesh as disk_mesh
+from whitted.reference.shapes.meshes import TESSELLATION as TESSELLATION
+from whitted.reference.shapes.rectangle import rectangle_mesh as rectangle_mesh
+from whitted.reference.shapes.sphere import sphere_mesh as sphere_mesh
 from whitted.tracer import transform as tf
 from whitted.tracer.errors import UserError
-from whitted.tracer.scene import (
-    Cylinder,
-    Disk,
-    Instance,
-    Mesh,
-    Paraboloid,
-    Polygon,
-    Rectangle,
-    Scene,
-    Sphere,
-    Triangle,
-)
-
-#: Largest distance of a tessellated shape's chords from the surface, relative to its size.
-TESSELLATION = 1e-4
-#: Film sub-pixels per stratum side (odd: one sits at the stratum's centre).
+from whitted.tracer.scene import Instance, Scene
 
 
 @dataclass
@@ -121,117 +114,10 @@ def props_text(props: dict) -> str:
 # ------------------------------------------------------------------ shapes
 
 
-def _segments(radius: float, size: float, e: float = TESSELLATION) -> int:
-    """Angle steps of a circle of ``radius`` whose chords lie within e x size of it.
-
-    A chord across dphi lies R (1 - cos(dphi / 2)) ~ R dphi^2 / 8 inside.
-    """
-    return max(16, math.ceil(2 * math.pi / math.sqrt(8 * e * size / radius)))
-
-
-def sphere_mesh(s: Sphere):
-    """(vertices, faces, normals) of a UV sphere, faces within TESSELLATION x radius of it.
-
-    A face of a quad cell of side a = R dphi (the rings use the same step) has a
-    circumradius up to a / sqrt(2), so its deepest point lies a^2 / (4 R) =
-    R dphi^2 / 4 inside: twice the chord depth of one step, hence the steps of
-    a chord depth TESSELLATION / 2.
-    """
-    n = _segments(1.0, 1.0, TESSELLATION / 2)
-    rings = max(8, n // 2)
-    theta = np.linspace(0, math.pi, rings + 1)
-    phi = np.linspace(0, 2 * math.pi, n + 1)
-    T, P = np.meshgrid(theta, phi, indexing="ij")
-    unit = np.stack([np.sin(T) * np.cos(P), np.sin(T) * np.sin(P), np.cos(T)], -1).reshape(-1, 3)
-    m = np.asarray(s.to_world(), dtype=np.float64)
-    verts = tf.apply_point(m, unit)
-    normals = tf.apply_normal(m, unit)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    return verts, _grid_faces(rings, n, verts), normals
-
-
-def _grid_faces(rows: int, cols: int, verts: np.ndarray) -> np.ndarray:
-    idx = np.arange((rows + 1) * (cols + 1)).reshape(rows + 1, cols + 1)
-    a, b, c, d = idx[:-1, :-1], idx[1:, :-1], idx[1:, 1:], idx[:-1, 1:]
-    faces = np.concatenate([np.stack([a, b, c], -1).reshape(-1, 3),
-                            np.stack([a, c, d], -1).reshape(-1, 3)])
-    area = np.linalg.norm(np.cross(verts[faces[:, 1]] - verts[faces[:, 0]],
-                                   verts[faces[:, 2]] - verts[faces[:, 0]]), axis=1)
-    return faces[area > 0]   # poles collapse to points
-
-
-def _orient(verts, faces, normal_of_face) -> np.ndarray:
-    """Faces wound so that their geometric normals point along ``normal_of_face`` (F x 3)."""
-    g = np.cross(verts[faces[:, 1]] - verts[faces[:, 0]], verts[faces[:, 2]] - verts[faces[:, 0]])
-    flip = (g * normal_of_face).sum(1) < 0
-    faces = faces.copy()
-    faces[flip] = faces[flip][:, [0, 2, 1]]
-    return faces
-
-
-def _normals_outward(verts, faces, normals):
-    """Wind each face so that its geometric normal agrees with its vertices' normals."""
-    avg = normals[faces].sum(1)
-    return _orient(verts, faces, avg)
-
-
-def disk_mesh(d: Disk):
-    m = np.asarray(d.to_world, dtype=np.float64)
-    c, ex, ey = d.corners()
-    n = _segments(1.0, 1.0)
-    phi = np.linspace(0, 2 * math.pi, n, endpoint=False)
-    local = np.concatenate([[[0.0, 0.0, 0.0]], np.stack([np.cos(phi), np.sin(phi),
-                                                          np.zeros(n)], -1)])
-    verts = tf.apply_point(m, local)
-    i = np.arange(n)
-    faces = np.stack([np.zeros(n, int), 1 + i, 1 + (i + 1) % n], -1)
-    return verts, _orient(verts, faces, np.broadcast_to(d.normal(), (n, 3))), None
-
-
-def rectangle_mesh(r: Rectangle):
-    m = np.asarray(r.to_world, dtype=np.float64)
-    verts = tf.apply_point(m, np.array([[-1, -1, 0], [1, -1, 0], [1, 1, 0], [-1, 1, 0.0]]))
-    faces = np.array([[0, 1, 2], [0, 2, 3]])
-    return verts, _orient(verts, faces, np.broadcast_to(r.normal(), (2, 3))), None
-
-
-def cylinder_mesh(c: Cylinder):
-    m = c.local_to_world()
-    n = _segments(1.0, 1.0)
-    phi = np.linspace(0, 2 * math.pi, n + 1)
-    Z, P = np.meshgrid(np.array([0.0, 1.0]), phi, indexing="ij")
-    local = np.stack([np.cos(P), np.sin(P), Z], -1).reshape(-1, 3)
-    grad = np.stack([np.cos(P), np.sin(P), np.zeros_like(P)], -1).reshape(-1, 3)
-    verts = tf.apply_point(m, local)
-    normals = tf.apply_normal(m, grad)
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    faces = _grid_faces(1, n, verts)
-    return verts, _normals_outward(verts, faces, normals), normals
-
-
 def shape_mesh(shape):
-    """(vertices, faces, normals or None) of a shape in world space (module table)."""
-    if isinstance(shape, Sphere):
-        v, f, n = sphere_mesh(shape)
-        return v, _normals_outward(v, f, n), n
-    if isinstance(shape, Rectangle):
-        return rectangle_mesh(shape)
-    if isinstance(shape, Disk):
-        return disk_mesh(shape)
-    if isinstance(shape, Cylinder):
-        return cylinder_mesh(shape)
-    if isinstance(shape, Triangle):
-        return np.asarray(shape.vertices, dtype=np.float64), np.array([[0, 1, 2]]), None
-    if isinstance(shape, Polygon):
-        v, f, _ = polygon_mesh(shape)
-        return v, np.asarray(f), None
-    if isinstance(shape, Paraboloid):
-        v, f, n, _, _, _ = paraboloid_mesh(shape)
-        return v, f, n
-    if isinstance(shape, Mesh):
-        return (np.asarray(shape.vertices, dtype=np.float64), np.asarray(shape.faces),
-                None if shape.normals is None else np.asarray(shape.normals, dtype=np.float64))
-    raise UserError(f"{type(shape).__name__.lower()}: no LuxCore equivalent")
+    """(vertices, faces, normals or None) of a shape in world space: its kind's
+    ``luxcore()`` (reference/shapes/)."""
+    return luxcore_mesh(shape)
 
 
 def _transformed(mesh, m: np.ndarray):

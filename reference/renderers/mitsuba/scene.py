@@ -37,15 +37,14 @@ camera pixel_offset       ``principal_point_offset_x/y`` (perspective; orthograp
 integrator                ``whitted`` (reference/renderers/mitsuba/onelobe.py)
 ========================  ===================================================
 
-Materials and lights are converted by their kinds' modules in
-``reference/materials/`` and ``reference/emitters/`` (each beside its
-``tracer/materials/`` or ``tracer/emitters/`` module), through their
-registries; shapes, the sensor and the integrator are converted here.
+Materials, lights and shapes are converted by their kinds' modules in
+``reference/materials/``, ``reference/emitters/`` and ``reference/shapes/`` (each
+beside its ``tracer/`` module), through their registries; the sensor and the
+integrator are converted here.
 """
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -60,20 +59,15 @@ from whitted.reference.materials import bsdf_tree as bsdf_tree
 from whitted.reference.materials import plugin_names
 from whitted.reference.materials.textures import texture_tree as texture_tree
 from whitted.reference.renderers.mitsuba.tree import matrix as _matrix
+from whitted.reference.shapes import mitsuba_tree
+
+# Shapes convert in their own modules (reference/shapes/), through its registry; the
+# tessellations that used to be here are re-exported ("X as X").
+from whitted.reference.shapes.paraboloid import PARABOLOID_DEVIATION as PARABOLOID_DEVIATION
+from whitted.reference.shapes.paraboloid import paraboloid_mesh as paraboloid_mesh
+from whitted.reference.shapes.polygon import polygon_mesh as polygon_mesh
 from whitted.tracer import transform as tf
-from whitted.tracer.scene import (
-    Cube,
-    Cylinder,
-    Disk,
-    Instance,
-    Mesh,
-    Paraboloid,
-    Polygon,
-    Rectangle,
-    Scene,
-    Sphere,
-    Triangle,
-)
+from whitted.tracer.scene import Instance, Scene
 
 
 def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
@@ -121,109 +115,15 @@ def rfilter_tree(film) -> dict:
     return {"type": "box"}
 
 
-#: Largest distance of a paraboloid's chords from the surface, relative to its size.
-PARABOLOID_DEVIATION = 1e-4
-
-
-def _mesh_node(name, vertices, faces, normals=None, uvs=None) -> dict:
-    """An in-memory mesh (an ``obj`` file beside the XML)."""
-    return {"type": "mesh", "name": name, "vertices": np.asarray(vertices, dtype=np.float64),
-            "faces": np.asarray(faces, dtype=np.int64).reshape(-1, 3),
-            "normals": None if normals is None else np.asarray(normals, dtype=np.float64),
-            "uvs": None if uvs is None else np.asarray(uvs, dtype=np.float64)}
-
-
-def polygon_mesh(poly: Polygon):
-    """(vertices, faces, uvs) of a polygon by ear clipping, uvs = its plane's 2D coordinates."""
-    from whitted.tracer.shapes.polygon import ear_clip, plane_frame
-
-    pts = np.asarray(poly.vertices, dtype=np.float64)
-    origin, u, v, _ = plane_frame(pts)
-    xy = (pts - origin) @ np.stack([u, v], axis=1)
-    return pts, np.asarray(ear_clip(xy)), xy
-
-
-def paraboloid_mesh(par: Paraboloid):
-    """(vertices, faces, normals, uvs, rings, segments) of a paraboloid, tessellated.
-
-    The surface is x = a s cos(phi), y = b s sin(phi), z = s^2 for
-    0 <= s <= sqrt(height). A chord across an angle step of a circle of radius R
-    lies R (1 - cos(dphi / 2)) ~ R dphi^2 / 8 inside it, and across a radial
-    step ds of the parabola z = s^2 (curvature <= 2) at most ds^2 / 4, so
-    dphi = sqrt(8 e / R) and ds = sqrt(4 e) keep both within e =
-    PARABOLOID_DEVIATION x the shape's size. Vertex normals are the exact
-    gradients, interpolated across each triangle like the tracer's smooth meshes.
-    """
-    m = np.asarray(par.to_world, dtype=np.float64)
-    s_max = math.sqrt(par.height)
-    r = max(par.a, par.b) * s_max
-    size = max(r, par.height)
-    e = PARABOLOID_DEVIATION * size
-    segments = max(16, math.ceil(2 * math.pi / math.sqrt(8 * e / r)))
-    rings = max(8, math.ceil(s_max / math.sqrt(4 * e)))
-    s_vals = np.linspace(0, s_max, rings + 1)
-    phi = np.linspace(0, 2 * math.pi, segments + 1)
-    S, P = np.meshgrid(s_vals, phi, indexing="ij")
-    local = np.stack([par.a * S * np.cos(P), par.b * S * np.sin(P), S * S], axis=-1)
-    grad = np.stack([2 * local[..., 0] / par.a ** 2, 2 * local[..., 1] / par.b ** 2,
-                     -np.ones_like(S)], axis=-1)
-    uvs = np.stack([S / s_max, P / (2 * math.pi)], axis=-1)
-    verts = tf.apply_point(m, local.reshape(-1, 3))
-    normals = tf.apply_normal(m, grad.reshape(-1, 3))
-    normals /= np.linalg.norm(normals, axis=1, keepdims=True)
-    idx = np.arange((rings + 1) * (segments + 1)).reshape(rings + 1, segments + 1)
-    a, b = idx[:-1, :-1], idx[1:, :-1]
-    c, d = idx[1:, 1:], idx[:-1, 1:]
-    # Counter-clockwise seen along the gradient (the outside, down and out).
-    faces = np.concatenate([np.stack([a, c, b], -1).reshape(-1, 3),
-                            np.stack([a, d, c], -1).reshape(-1, 3)])
-    area = np.linalg.norm(np.cross(verts[faces[:, 1]] - verts[faces[:, 0]],
-                                   verts[faces[:, 2]] - verts[faces[:, 0]]), axis=1)
-    faces = faces[area > 0]  # the apex ring collapses to a point
-    return verts, faces, normals, uvs.reshape(-1, 2), rings, segments
-
-
 def shape_tree(scene: Scene, shape, index: int, prefix: str = "shape",
                models: bool = False) -> dict:
     """Plugin tree of a shape; in-memory meshes are ``{"type": "mesh", ...}`` nodes.
 
     ``models``: tracer-only parts as the harness models them (see
     :func:`reference.materials.bsdf_tree`)."""
-    name = f"{prefix}_{index}"
-    if isinstance(shape, Sphere):
-        # Mitsuba composes to_world x translate(center) x scale(radius): give it the rotation.
-        rot = np.eye(4)
-        rot[:3, :3] = np.asarray(shape.rotation)
-        t = {"type": "sphere", "center": ("point", shape.center),
-             "radius": ("float", shape.radius)}
-        if not np.allclose(rot, np.eye(4)):
-            t = {"type": "sphere", "to_world": _matrix(shape.to_world())}
-    elif isinstance(shape, Rectangle):
-        t = {"type": "rectangle", "to_world": _matrix(shape.to_world)}
-    elif isinstance(shape, Disk):
-        t = {"type": "disk", "to_world": _matrix(shape.to_world)}
-    elif isinstance(shape, Cylinder):
-        t = {"type": "cylinder", "p0": ("point", shape.p0), "p1": ("point", shape.p1),
-             "radius": ("float", shape.radius), "to_world": _matrix(shape.to_world)}
-    elif isinstance(shape, Triangle):
-        t = _mesh_node(name, shape.vertices, [[0, 1, 2]])
-    elif isinstance(shape, Polygon):
-        verts, faces, uvs = polygon_mesh(shape)
-        t = _mesh_node(name, verts, faces, None, uvs)
-    elif isinstance(shape, Paraboloid):
-        verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape)
-        t = _mesh_node(name, verts, faces, normals, uvs)
-    elif isinstance(shape, Cube):
-        t = {"type": "cube", "to_world": _matrix(shape.to_world)}
-    elif isinstance(shape, Mesh):
-        kind = "ply" if shape.file.lower().endswith(".ply") else "obj"
-        t = {"type": kind, "filename": ("string", shape.file),
-             "face_normals": ("boolean", not shape.smooth), "to_world": _matrix(shape.to_world)}
-    elif isinstance(shape, Instance):
-        return {"type": "instance", "to_world": _matrix(shape.to_world),
-                "shapegroup": {"type": "ref", "id": ("string", f"group_{shape.group}")}}
-    else:
-        raise TypeError(f"no Mitsuba conversion for {type(shape).__name__}")
+    t = mitsuba_tree(shape, f"{prefix}_{index}")
+    if not shape.takes_material:  # an instance: its group's shapes carry their own
+        return t
     material = scene.material_of(shape)
     t["bsdf"] = bsdf_tree(material, models)
     if shape.emitter is not None:
