@@ -505,6 +505,20 @@ LIGHTS = {
 }
 
 
+#: Mitsuba shape plugin -> the importer's method that maps it (one line per plugin; an
+#: ``instance`` of a ``shapegroup`` is the importer's own, :meth:`_Importer.shape`).
+SHAPES = {
+    "sphere": "_sphere",
+    "rectangle": "_placed",
+    "disk": "_placed",
+    "cube": "_placed",
+    "cylinder": "_cylinder",
+    "obj": "_mesh_file",
+    "ply": "_mesh_file",
+    "serialized": "_serialized",
+}
+
+
 class _Importer:
     def __init__(self, path: Path, approximate: bool, params: dict, convert=None):
         self.convert = convert
@@ -1136,49 +1150,11 @@ class _Importer:
             shape["to_world"] = self.to_world(p.get("to_world"))
             out.append(shape)
             return
-        if kind == "sphere":
-            shape["type"] = "sphere"
-            if "center" in p:
-                shape["center"] = _xyz(p["center"])
-            if "radius" in p:
-                shape["radius"] = float(self.number(p["radius"]))
-        elif kind in ("rectangle", "disk", "cube"):
-            shape["type"] = kind
-        elif kind == "cylinder":
-            shape["type"] = "cylinder"
-            for k in ("p0", "p1"):
-                if k in p:
-                    shape[k] = _xyz(p[k])
-            if "radius" in p:
-                shape["radius"] = float(self.number(p["radius"]))
-        elif kind in ("obj", "ply"):
-            shape["type"] = "mesh"
-            shape["file"] = str(self.res.find(node, self.string(p.get("filename")), "mesh file"))
-            shape["smooth"] = not self.boolean(p.get("face_normals"), False)
-            triangle = _single_triangle(Path(shape["file"]))
-            if triangle is not None and not shape["smooth"]:  # one flat face: a triangle
-                shape = {"type": "triangle", "vertices": triangle}
-            if self.boolean(p.get("flip_normals"), False):
-                self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
-        elif kind == "serialized" and self.convert is not None:
-            source = self.res.find(node, self.string(p.get("filename")), "serialized mesh")
-            index = self.integer(p.get("shape_index"), 0)
-            if index < 0:
-                raise XMLImportError(f"{node.where()}: expected a shape_index of at least 0, "
-                                     f"got {index}")
-            shape["type"] = "mesh"
-            try:
-                shape["file"] = str(self.convert(source, index))
-            except UserError as e:  # the file is not a mesh Mitsuba reads, or too large
-                raise XMLImportError(f"{node.where()}: {e}") from None
-            shape["smooth"] = not self.boolean(p.get("face_normals"), False)
-            self.note(where, f"serialized mesh {source.name} converted by Mitsuba to "
-                             f"{Path(shape['file']).name}")
-        elif kind == "serialized":
-            self.outside(node, "a serialized mesh (`whitted import` converts it through "
-                               "Mitsuba; render the imported TOML)", None, where)
-        else:
+        method = SHAPES.get(kind)
+        if method is None:
             self.outside(node, f'shape "{_short(kind)}"', None, where)
+        else:
+            shape = getattr(self, method)(node, p, where)
         if "flip_normals" in p and kind != "obj" and kind != "ply" and \
                 self.boolean(p["flip_normals"], False):
             self.outside(p["flip_normals"], "flip_normals", None, where)
@@ -1212,6 +1188,60 @@ class _Importer:
             if not bsdfs:
                 shape["material"] = self._default_material()
         out.append(shape)
+
+    # Each Mitsuba shape plugin of SHAPES: (node, its properties, the TOML path) -> the
+    # shape's table, without what every shape has (to_world, bsdf, emitter: shape()).
+
+    def _sphere(self, node: Node, p: dict, where: str) -> dict:
+        shape: dict = {"type": "sphere"}
+        if "center" in p:
+            shape["center"] = _xyz(p["center"])
+        if "radius" in p:
+            shape["radius"] = float(self.number(p["radius"]))
+        return shape
+
+    def _placed(self, node: Node, p: dict, where: str) -> dict:
+        return {"type": node.type}   # rectangle, disk, cube: all in to_world
+
+    def _cylinder(self, node: Node, p: dict, where: str) -> dict:
+        shape: dict = {"type": "cylinder"}
+        for k in ("p0", "p1"):
+            if k in p:
+                shape[k] = _xyz(p[k])
+        if "radius" in p:
+            shape["radius"] = float(self.number(p["radius"]))
+        return shape
+
+    def _mesh_file(self, node: Node, p: dict, where: str) -> dict:
+        shape: dict = {"type": "mesh"}
+        shape["file"] = str(self.res.find(node, self.string(p.get("filename")), "mesh file"))
+        shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+        triangle = _single_triangle(Path(shape["file"]))
+        if triangle is not None and not shape["smooth"]:  # one flat face: a triangle
+            shape = {"type": "triangle", "vertices": triangle}
+        if self.boolean(p.get("flip_normals"), False):
+            self.outside(p["flip_normals"], "flip_normals on a mesh", None, where)
+        return shape
+
+    def _serialized(self, node: Node, p: dict, where: str) -> dict:
+        if self.convert is None:
+            self.outside(node, "a serialized mesh (`whitted import` converts it through "
+                               "Mitsuba; render the imported TOML)", None, where)
+            return {}
+        source = self.res.find(node, self.string(p.get("filename")), "serialized mesh")
+        index = self.integer(p.get("shape_index"), 0)
+        if index < 0:
+            raise XMLImportError(f"{node.where()}: expected a shape_index of at least 0, "
+                                 f"got {index}")
+        shape: dict = {"type": "mesh"}
+        try:
+            shape["file"] = str(self.convert(source, index))
+        except UserError as e:  # the file is not a mesh Mitsuba reads, or too large
+            raise XMLImportError(f"{node.where()}: {e}") from None
+        shape["smooth"] = not self.boolean(p.get("face_normals"), False)
+        self.note(where, f"serialized mesh {source.name} converted by Mitsuba to "
+                         f"{Path(shape['file']).name}")
+        return shape
 
     def _default_material(self) -> str:
         mats = self.out["materials"]
