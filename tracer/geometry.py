@@ -5,9 +5,10 @@ disks, single triangles, polygons, cylinders, paraboloids, one block per
 mesh, one per instance). Each kind's module (``tracer/shapes/<kind>.py``)
 packs its own blocks and intersects them; :func:`pack` is the one loop over
 the kinds, and instancing, which recurses into a group's geometry, is here.
-Every primitive has a global id: each block owns a contiguous range. A query asks every block for its nearest hit and keeps the
-nearest of all, which is what lecture 1's "Intersection routine" does for
-one ray at a time, here for a whole wavefront at once.
+Every primitive has a global id: each block owns a contiguous range. A
+query asks every block for its nearest hit and keeps the nearest of all,
+which is what lecture 1's "Intersection routine" does for one ray at a
+time, here for a whole wavefront at once.
 
 Small tables are written into the kernel one primitive after another with
 their numbers as constants; larger ones are walked by a symbolic loop that

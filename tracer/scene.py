@@ -595,14 +595,15 @@ def _parse_light(t: Table) -> Light:
 
 def _parse_shape(t: Table, materials: dict[str, Material], groups: dict,
                  base: Path, in_group: bool = False) -> Shape:
-    kind = t.string("type", choices=SHAPE_TYPES)
+    kind = t.string("type", choices=tuple(_shapes.REGISTRY))
     module = _shapes.REGISTRY[kind]
     if in_group and module.MODEL.not_in_groups:
         t.fail("type", module.MODEL.not_in_groups)
     emitter = None
     if t.has("emitter"):
-        if kind not in EMITTER_SHAPES or in_group:
-            t.fail("emitter", "area lights are supported on " + ", ".join(EMITTER_SHAPES) +
+        emitting = _shapes.emitting()
+        if kind not in emitting or in_group:
+            t.fail("emitter", "area lights are supported on " + ", ".join(emitting) +
                    (" outside groups" if in_group else "") + f", not on a {kind}")
         emitter = t.table("emitter", parse=_parse_emitter)
     if not module.MODEL.takes_material:
