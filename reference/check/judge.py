@@ -841,6 +841,8 @@ def side_by_side(image: np.ndarray, reference: np.ndarray, failing: np.ndarray, 
 
 #: What ``whitted check`` writes into its output folder.
 OUTPUT_NAMES = ("diff.png", "side_by_side.png", "reference.exr", "check.json", "check.html")
+#: written too where the image fails and a fitted output curve is shown
+OPTIONAL_OUTPUT_NAMES = ("curve.png",)
 
 
 def refuse_in_the_way(folder, names) -> None:

@@ -74,6 +74,9 @@ FORMULAS: dict[tuple[str, str], list[tuple[str, str]]] = {
                                "The Fresnel equation"),
                               ("diffuse base kd / (1 - F_dr) (1 - F_i)(1 - F_o) / (eta^2 pi)",
                                "The illumination equation")],
+    ("material", "blend"): [("linear blend f = (1 - w) f_1 + w f_2 of two smooth BRDFs",
+                             "BRDF types"),
+                            ("Lambertian BRDF f = rho / pi", "BRDFs: the diffuse BRDF")],
     ("material", "phong"): [("Phong lobe ks (n + 2) / (2 pi) cos^n(alpha)",
                              "Phong's reflection model"),
                             ("Blinn-Phong lobe with the half vector", "Phong's reflection model")],
@@ -873,9 +876,12 @@ def update_references(result: SuiteResult, suite: Suite) -> list[Path]:
 
 
 def _top_suspect(run) -> dict | None:
-    """The catalog's bug that explains most of a failing image's difference (or None)."""
+    """The cause check names for a failing image's difference: a catalog bug or an output
+    convention, only where check names one (``named``); None where it cannot."""
     sp = getattr(run, "suspects", None)
-    return sp["top"][0] if sp and sp["top"] else None
+    if not sp or not sp.get("top") or not sp.get("named", True):
+        return None
+    return sp["top"][0]
 
 
 def format_suite(result: SuiteResult) -> str:

@@ -109,12 +109,16 @@ def run(args) -> int:
     path = resolve_scene(args.scene)
     structure = check_and_print(path, getattr(args, "approximate", False)) \
         if is_xml(path) else None
-    from whitted.reference.check.judge import OUTPUT_NAMES, refuse_in_the_way
+    from whitted.reference.check.judge import (
+        OPTIONAL_OUTPUT_NAMES,
+        OUTPUT_NAMES,
+        refuse_in_the_way,
+    )
     from whitted.tracer.imageio import StagedFolder
 
     outdir = output_folder(args.output or Path("out") / "check" /
                            f"{scene.name}-{Path(args.image).stem}")
-    refuse_in_the_way(outdir, OUTPUT_NAMES)
+    refuse_in_the_way(outdir, OUTPUT_NAMES + OPTIONAL_OUTPUT_NAMES)
     # All five files or none: an error, a full disk or Ctrl-C leaves no partial output.
     with StagedFolder(outdir) as staged:
         use_backend(args)
