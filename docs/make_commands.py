@@ -4,7 +4,7 @@
 
 Each command's usage and options come from ``reference.cli.build_parser()``; what a
 command does, in a paragraph, and the page's introduction are written here by hand.
-``tests/test_robustness.py`` fails when docs/commands.md is not what this prints, so a
+``tests/e2e/test_robustness.py`` fails when docs/commands.md is not what this prints, so a
 change to an option is followed by running the line above.
 """
 
@@ -40,10 +40,10 @@ command that exits 2 before its outputs are complete leaves none of them (`depth
 moves its images into the folder only when the sweep has finished; an interrupt,
 Ctrl-C, exits 130 the same way). Option errors are one line too, pointing to `--help`.
 
-`tests/test_fuzz.py` fuzzes the scene loader, the light-path expressions and the command
+`tests/e2e/test_fuzz.py` fuzzes the scene loader, the light-path expressions and the command
 line with Hypothesis and checks this contract: exit 0 with a finite image, or exit 2
 with one line and nothing written. The default run is derandomized and takes about
-15 s; `python -m pytest -m slow tests/test_fuzz.py` runs thousands of random cases,
+15 s; `python -m pytest -m slow tests/e2e/test_fuzz.py` runs thousands of random cases,
 Mitsuba's commands included (about 2 minutes).
 
 ## Common options

@@ -12,7 +12,7 @@ function). The kinds are those of the registries: ``tracer.materials.REGISTRY``,
 ``tracer.shapes`` (``REGISTRY`` or ``SHAPES``) as soon as it has one; until then
 the shapes are the schema's, described by ``tracer/shapes/<kind>.py`` where that
 module exists. Nothing here lists a kind or a key by hand.
-``tests/test_kinds_page.py`` fails when docs/kinds.md is not what this prints, so
+``tests/project/test_kinds_page.py`` fails when docs/kinds.md is not what this prints, so
 a change to a kind's docstring or keys is followed by running the line above.
 """
 

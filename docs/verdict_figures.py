@@ -4,7 +4,7 @@
 
 For each scene (default: glass_sphere emitter_in_glass area_lights whitted_mix)
 a correct tracer is judged against the one-lobe reference on independent
-seeds (reference passes and tracer seeds), as ``tests/test_statistics.py``
+seeds (reference passes and tracer seeds), as ``tests/reference/verdicts/test_statistics.py``
 does, and known errors are injected into its image. Printed per scene:
 
 * fails: trials failed by each rule (z: per pixel, with the zero-variance rule;

@@ -16,6 +16,15 @@ from whitted import tracer  # noqa: F401  (must precede drjit)
 ROOT = Path(__file__).resolve().parent.parent
 SCENES = ROOT / "scenes"
 
+# The tests mirror the packages (tests/tracer/, tests/reference/<role>/, tests/e2e/,
+# tests/project/); a few share helpers across folders by module name (test_bvh's rays,
+# test_fuzz's scenes, test_new_kinds' masks), so every test folder is on the path.
+for _folder in sorted(p for p in Path(__file__).resolve().parent.rglob("*")
+                      if p.is_dir() and p.name not in ("data", "__pycache__")
+                      and "data" not in p.relative_to(Path(__file__).resolve().parent).parts):
+    if str(_folder) not in sys.path:
+        sys.path.append(str(_folder))
+
 
 def pytest_addoption(parser):
     parser.addoption("--backend", default=None, choices=("auto", "llvm", "cuda"),

@@ -59,7 +59,7 @@ Embree on the same rays: testing a leaf's triangles in a loop of their own
 (rather than a fixed number of masked tests per step) and placing records on
 64-byte boundaries each gave about 1.7x; a 4-wide tree, reading records as
 Array4f packets, and a stack of entry distances to skip deferred nodes were
-each slower. tests/test_bvh.py and tests/test_packets.py check results, never
+each slower. tests/tracer/test_bvh.py and tests/tracer/test_packets.py check results, never
 times; ``benchmarks/bench_mesh.py`` times the render against Embree's.
 """
 
@@ -268,8 +268,8 @@ def _next_float(x, direction: int):
 #: this many, each binned in a lane, and a node's bins are the sums of its chunks'. Both
 #: ways give the same bins, so from 32 up (a smaller node uses fewer bins, which the
 #: chunked path does not) the tree does not depend on it (all seven arrays compared,
-#: knots of 14,400, 144,000 and 1,000,000 triangles; tests/test_bvh.py). On the CPU, warm builds
-#: (a throwaway script, medians of 9, two rounds): 144,000 triangles 88-92 ms at 128,
+#: knots of 14,400, 144,000 and 1,000,000 triangles; tests/tracer/test_bvh.py). On the CPU,
+#: warm builds (a throwaway script, medians of 9, two rounds): 144,000 triangles 88-92 ms at 128,
 #: 81-84 at 512, 80 at 1024, 75-78 at 4096; 1,000,000 triangles 484-528 ms at 128,
 #: 424-434 at 4096; 14,400 triangles 34-36 ms at each.
 CHUNK = 4096
@@ -698,7 +698,7 @@ def pack_nodes(b: BVHArrays) -> tuple[np.ndarray, int, int]:
     corners. :func:`tracer.shapes.triangle.intersect` works in the ray's
     sheared space and may take a ray a few roundings of the ray's length
     beside its triangle; the widening of t_far in the slab test covers that
-    (tests/test_watertight.py aims rays from far away at edges on box faces).
+    (tests/tracer/test_watertight.py aims rays from far away at edges on box faces).
 
     The stack size is the depth of the tree plus one: a ray at a node of
     depth k has at most k deferred nodes (one per ancestor), so its stack

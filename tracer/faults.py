@@ -23,7 +23,7 @@ the ``if``, so the kernels are the same (same IR, same hash: Dr.Jit's kernel
 cache, in memory and on disk under ``~/.drjit``, is keyed by a hash of the
 generated IR). A switch that is on changes the traced operations, hence the
 IR and its hash, so its kernel is compiled and cached under another key and
-is never taken for the unswitched one (``tests/test_faults.py`` checks the
+is never taken for the unswitched one (``tests/tracer/test_faults.py`` checks the
 hashes and that switching off restores the image bit for bit). A switch
 decided where a scene is prepared (an emitter's area, an instance's normal
 matrix) holds for Integrators built while it is on.

@@ -59,7 +59,7 @@ of one pixel (:data:`GROUP`, :attr:`Integrator.group`): the K rays walk the
 mesh's BVH together, reading each node once (:meth:`Geometry.closest_hit_group`),
 and so do their shadow rays to each light; the rest of the shading is done for
 each ray on its own, by the same operations, so the image and the ray counts
-are those of one ray a lane, exactly (``tests/test_packets.py``). The light of
+are those of one ray a lane, exactly (``tests/tracer/test_packets.py``). The light of
 the K rays is put back in sample order after the level's kernel.
 
 In a scene with mirrors or glass and max_depth > 2, the ``stack`` schedule
@@ -73,7 +73,7 @@ level's light are gone: Heckbert's scene at DEPTH 25 (256x256, 16 spp) went
 from 684 kernels and 76 M rays/s to 18 kernels and about 140 M rays/s
 (``benchmarks/bench_speed.py recursion``). The counts per level are equal
 ray for ray, and the images equal to float32 rounding
-(``tests/test_schedules.py``).
+(``tests/tracer/test_schedules.py``).
 """
 
 from __future__ import annotations
@@ -861,7 +861,7 @@ class Integrator:
         trees: each lane traces its sample's tree once and keeps one sum of light per
         seed, sampling each sampled light once per seed (:meth:`_shade`). The seeds'
         trees are the same ray for ray, so each image is still, bit for bit, that
-        seed's own render (``tests/test_schedules.py``), and the counts are the rays
+        seed's own render (``tests/tracer/test_schedules.py``), and the counts are the rays
         actually traced.
         """
         seeds = tuple(seed32(sd) for sd in seeds)

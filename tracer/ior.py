@@ -8,7 +8,7 @@ indices eta + i k are Mitsuba's spectra (``data/ior/<name>.eta.spd`` and
 Solids") as Mitsuba's RGB variants reduce them: integrated against the CIE 1931
 colour-matching functions and converted from XYZ to linear sRGB, unbounded
 (``spectrum_list_to_srgb``), a colour out of gamut clamped to zero; rounded to
-6 decimals. ``tests/test_new_kinds.py`` checks every value against Mitsuba.
+6 decimals. ``tests/tracer/test_new_kinds.py`` checks every value against Mitsuba.
 ``"none"`` is Mitsuba's perfect mirror (eta 0, k 1: reflectance 1 at every angle).
 """
 

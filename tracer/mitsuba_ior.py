@@ -4,7 +4,7 @@ The names a Mitsuba ``dielectric`` (``int_ior``/``ext_ior``) accepts instead of 
 number, with Mitsuba's values (at 589 nm, 20 degrees C). Source: the table of
 the ``dielectric`` plugin in Mitsuba 3's documentation ("Smooth dielectric
 material"; ``include/mitsuba/render/ior.h``), which takes them from Mitsuba
-0.5's ``ior.h``; tests/test_import.py checks every entry against
+0.5's ``ior.h``; tests/reference/renderers/mitsuba/test_import.py checks every entry against
 ``mi.load_dict`` of a dielectric with that name.
 """
 

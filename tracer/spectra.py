@@ -27,7 +27,7 @@ scaled by 470 / 1000 / 106.7502593994140625 (so that a unit spectrum has luminan
 (``include/mitsuba/core/spectrum.h``). It runs in double precision on the float32
 tables; the colour is stored as float32. :func:`to_rgb` follows it step for step,
 in float64 with numpy, and rounds to float32 at the same place
-(``tests/test_spectra.py`` checks it against Mitsuba's own reading of random spectra
+(``tests/tracer/test_spectra.py`` checks it against Mitsuba's own reading of random spectra
 of each kind).
 
 Data: ``cie1931_tbl`` of ``src/core/spectrum.cpp`` (the CIE 1931 2-degree observer,

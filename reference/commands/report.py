@@ -91,7 +91,8 @@ def _report_luxcore(args) -> bool:
     LuxCore is optional: where it is missing, fails or runs past its time limits the
     report goes on without it and says so ("not available", reference.report.build), its
     exit status the tracer's against Mitsuba. WHITTED_REQUIRE_LUXCORE=1 (CI) makes
-    LuxCore's tests fail without it (tests/test_luxcore.py), not the report.
+    LuxCore's tests fail without it (tests/reference/renderers/luxcore/test_luxcore.py),
+    not the report.
     """
     return not args.no_luxcore
 

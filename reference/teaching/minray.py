@@ -18,7 +18,7 @@ its normal, its refraction), so that every decision on which the count
 depends (a hit or a miss, total internal reflection, a light facing the
 hit) comes out as minray's double precision makes it. Colours are not
 computed. Checked against a build of minray with counters added
-(``tests/data/minray/ray_counts.txt``, ``tests/test_minray.py``).
+(``tests/data/minray/ray_counts.txt``, ``tests/reference/teaching/test_minray.py``).
 
 :func:`agreement` states how two images' printed numbers agree, and
 :func:`decision_margins` finds, per pixel, how close minray's own ray tree

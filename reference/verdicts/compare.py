@@ -738,7 +738,8 @@ def at_strata_centres(scene):
 
     The references evaluate the tracer's own samples, the strata centres, and take
     each pixel's mean: a gaussian filter or jitter changes only where samples lie
-    and how they are weighted, the same on both sides (tests/test_import.py judges
+    and how they are weighted, the same on both sides
+    (tests/reference/renderers/mitsuba/test_import.py judges
     the filter and the jitter against Mitsuba's own), so compare judges the
     radiance at the centres.
     """

@@ -4,7 +4,7 @@ LuxCore's vote never changes the report's verdict (the tracer's against Mitsuba)
 neither may LuxCore's absence, its failure or its time limits: the report is written,
 says "not available: <why>" in index.html, report.md and report.json (and in one line
 on stderr), and exits with the tracer's status. WHITTED_REQUIRE_LUXCORE=1 (CI) makes
-LuxCore's tests fail without it (tests/test_luxcore.py), not the report.
+LuxCore's tests fail without it (tests/reference/renderers/luxcore/test_luxcore.py), not the report.
 
 Each report here is one glass scene at the quick sizes, without the Fresnel curves.
 """
@@ -26,7 +26,7 @@ from whitted.reference.renderers.luxcore import render as lx
 from whitted.tracer import load_scene
 from whitted.tracer.errors import UserError
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 REPORT = ["report", "--scenes", "glass_sphere", "--quick", "--no-fresnel"]
 
 

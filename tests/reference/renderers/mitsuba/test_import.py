@@ -29,7 +29,7 @@ from whitted.tracer.mitsuba_ior import IOR
 from whitted.tracer.mitsuba_xml import XMLImportError, read_xml
 from whitted.tracer.scene import Camera, parse_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[4]
 DATA = ROOT / "scenes" / "mitsuba-data" / "tests" / "scenes"
 FLOATING = DATA / "floating_sphere" / "test_directional_direct.xml"
 INSTANCING = DATA / "instancing" / "test_instancing_path.xml"

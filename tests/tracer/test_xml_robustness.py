@@ -6,7 +6,7 @@ inputs that hung (an include bomb, FIFOs), inputs that read gigabytes
 (/dev/zero, includes beyond WHITTED_MAX_SCENE_BYTES), files named by the scene
 (symbolic links followed, regular files only), partial output, long values
 echoed in messages, and Mitsuba's own errors (corrupt ``serialized`` files,
-``--verify``). The CLI runs in-process, as in tests/test_import.py.
+``--verify``). The CLI runs in-process, as in tests/reference/renderers/mitsuba/test_import.py.
 """
 
 import contextlib
@@ -37,8 +37,8 @@ SCENE = """<scene version="3.0.0">
 </scene>
 """
 
-SERIALIZED = (Path(__file__).parents[1] / "scenes" / "mitsuba-data" / "tests" / "serialized"
-              / "rectangle_normals_uv.serialized")
+SERIALIZED = (Path(__file__).resolve().parents[2] / "scenes" / "mitsuba-data" / "tests"
+              / "serialized" / "rectangle_normals_uv.serialized")
 
 
 def scene(tmp_path, name="s.xml", **kw) -> Path:

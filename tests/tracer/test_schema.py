@@ -28,7 +28,7 @@ from whitted.tracer.materials import diffuse, textures
 from whitted.tracer.scene import parse_scene
 from whitted.tracer.schema import scene_schema
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 #: The built-in scenes and the scenes stored as test data (one imported from Mitsuba).
 SCENES = sorted(ROOT.glob("scenes/*.toml")) + sorted((ROOT / "tests" / "data").rglob("*.toml"))
 

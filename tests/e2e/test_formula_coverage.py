@@ -28,7 +28,7 @@ elsewhere in a file leave it valid. An entry that matches no unreached line fail
 ``tested_by`` names no test that exists (``"none"`` says that no test reaches the line
 either: a finding, kept visible).
 
-Run as a script (``python tests/test_formula_coverage.py OUT.json``) it is the measuring
+Run as a script (``python tests/e2e/test_formula_coverage.py OUT.json``) it is the measuring
 child; ``--scenes PATTERN`` renders only some built-in scenes (to see which lines a
 scene alone reaches).
 """
@@ -45,7 +45,7 @@ import time
 import tomllib
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 ALLOWED = ROOT / "tests" / "data" / "coverage_allowed.toml"
 
 #: samples per pixel at most (the report's quick sizes, fewer samples: a line is reached

@@ -25,7 +25,7 @@ from whitted.tracer.camera import generate_rays
 from whitted.tracer.integrator import Integrator
 from whitted.tracer.shapes import triangle as tri_f
 
-DATA = Path(__file__).parent / "data" / "mitsuba_floating_sphere"
+DATA = Path(__file__).resolve().parents[1] / "data" / "mitsuba_floating_sphere"
 RECTANGLE_OBJ = DATA / "rectangle.obj"
 
 #: Unit roundoff of float32.

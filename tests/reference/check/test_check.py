@@ -24,7 +24,7 @@ from whitted.reference.check.judge import (
 
 #: Glass and a mirror before emitting panels: Mitsuba's path tracer converges to Whitted's
 #: image there.
-GLASS_LIGHTS = Path(__file__).parent / "data" / "glass_before_lights.toml"
+GLASS_LIGHTS = Path(__file__).resolve().parents[2] / "data" / "glass_before_lights.toml"
 
 
 def _user(image, **kw) -> UserImage:

@@ -15,7 +15,7 @@ from pathlib import Path
 
 import pytest
 
-SCENE = Path(__file__).resolve().parents[1] / "scenes" / "heckbert_minray.toml"
+SCENE = Path(__file__).resolve().parents[2] / "scenes" / "heckbert_minray.toml"
 
 CHILD = textwrap.dedent("""
     import json, resource, sys
@@ -38,6 +38,6 @@ def peak_bytes(chunk: int | None) -> int:
 def test_deep_render_peak_memory_is_bounded():
     """1920 x 1080 at 4 spp (8.3 M samples; DEPTH 25, 2.2e8 rays): with the chunk sized
     for max_depth 26 (2^19 samples) the process peaked at 1.6 GB here, with the fixed
-    2^21 of before at 4.1 GB (tests/test_memory.py's peak_bytes(1 << 21)); 2 GiB lies
+    2^21 of before at 4.1 GB (tests/e2e/test_memory.py's peak_bytes(1 << 21)); 2 GiB lies
     between, with a margin for Dr.Jit's allocator."""
     assert peak_bytes(None) < 2 * 1024 ** 3

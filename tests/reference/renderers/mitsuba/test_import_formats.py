@@ -20,7 +20,7 @@ from whitted.tracer.errors import UserError
 from whitted.tracer.mitsuba_xml import XMLImportError, read_xml
 from whitted.tracer.scene import parse_scene
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[4]
 CBOX = ROOT / "tests" / "data" / "real_scenes" / "mitsuba-data" / "scenes" / "cbox"
 #: A real scene the reader refuses (a rough dielectric).
 REFUSED = (ROOT / "tests" / "data" / "real_scenes" / "mitsuba-data" / "tests" / "scenes" /

@@ -17,7 +17,7 @@ from conftest import SCENES, run_cli
 from whitted.tracer import load_scene
 from whitted.tracer.errors import UserError
 
-DATA = Path(__file__).resolve().parent / "data" / "luxcore"
+DATA = Path(__file__).resolve().parents[3] / "data" / "luxcore"
 
 
 @pytest.fixture(scope="module")
@@ -183,7 +183,7 @@ def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
             "print('loaded')\n")
     try:
         out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             timeout=60, cwd=Path(__file__).resolve().parent.parent)
+                             timeout=60, cwd=Path(__file__).resolve().parents[4])
     except subprocess.TimeoutExpired:
         pytest.fail("Mitsuba's load of an EXR map hung with Dr.Jit on one thread")
     assert out.returncode == 0, out.stderr[-2000:]

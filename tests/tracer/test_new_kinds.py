@@ -1,9 +1,9 @@
 """The material kinds of Mitsuba's BSDF set beyond the lectures': their data and formulas.
 
 Each kind is also rendered against Mitsuba by the built-in scene that shows it
-(``scenes/metals.toml``, ...: ``tests/test_cross_render.py`` at float
+(``scenes/metals.toml``, ...: ``tests/e2e/test_cross_render.py`` at float
 precision), and its formula bug is caught by ``whitted mutants``
-(``tests/test_mutants.py``); here the parts that are checked on their own.
+(``tests/reference/test_mutants.py``); here the parts that are checked on their own.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ def test_named_indices_are_mitsubas(mi):
     import importlib.util
 
     spec = importlib.util.spec_from_file_location(
-        "ior_tables", Path(__file__).parents[1] / "docs" / "ior_tables.py")
+        "ior_tables", Path(__file__).resolve().parents[2] / "docs" / "ior_tables.py")
     tables = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(tables)
     for name in tables.DIELECTRIC_NAMES:
@@ -96,7 +96,7 @@ def test_area_lights_on_a_mesh_a_cube_a_polygon_and_a_cylinder_agree_with_mitsub
     from whitted.reference.verdicts.compare import compare_scene
     from whitted.tracer import load_scene
 
-    scene = load_scene(Path(__file__).parent / "data" / "shape_lights.toml")
+    scene = load_scene(Path(__file__).resolve().parents[1] / "data" / "shape_lights.toml")
     result, tracer_img, _ = compare_scene(scene, tmp_path, second_opinion=False)
     assert result.reference == "onelobe" and result.test == "z-test"
     assert result.passed, result.checks

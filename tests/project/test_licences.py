@@ -7,7 +7,7 @@ from pathlib import Path
 
 from packaging.requirements import Requirement
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 
 #: Strong copyleft in a licence field, an SPDX expression or a trove classifier: the GPL
 #: and the AGPL (a program distributed with them falls under their terms). The LGPL,
@@ -64,7 +64,7 @@ def test_no_runtime_dependency_is_gpl_licensed():
 
 
 def test_no_test_dependency_is_gpl_licensed():
-    """The test extra too (jsonschema, MIT, for tests/test_schema.py; hypothesis, MPL-2.0):
+    """The test extra too (jsonschema, MIT, for tests/tracer/test_schema.py; hypothesis, MPL-2.0):
     the test suite is distributed with the project."""
     closure = runtime_closure("test")
     assert "jsonschema" in closure and closure["jsonschema"], closure.get("jsonschema")

@@ -14,8 +14,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_bvh import assert_same_hits, random_rays, torus, v3
 
-from tests.test_bvh import assert_same_hits, random_rays, torus, v3
 from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from whitted.tracer import load_scene
 from whitted.tracer.bvh import BVH, INVALID
@@ -108,7 +108,7 @@ def test_the_geometry_answers_a_group_as_it_answers_each_ray(jit):
     assert (prims >= mesh.base).any() and (prims < mesh.base).any()
 
 
-KNOT = Path(__file__).resolve().parent.parent / "scenes" / "mesh_knot.toml"
+KNOT = Path(__file__).resolve().parents[2] / "scenes" / "mesh_knot.toml"
 
 #: Variants of the mesh scene (two meshes, a rectangle, two lights): (name, a change of
 #: its text, Integrator options): as it is; a glass floor (two more levels, one ray a

@@ -20,7 +20,7 @@ from whitted.reference.renderers.mitsuba.original import compare_structure
 from whitted.tracer import mitsuba_xml
 from whitted.tracer.mitsuba_xml import mitsuba_rotate, read_xml
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[4]
 REAL = ROOT / "tests" / "data" / "real_scenes"
 TEXTURE_INTERP = (REAL / "mitsuba-data" / "tests" / "scenes" / "texture_interp" /
                   "test_texture_interp_direct.xml")

@@ -19,7 +19,7 @@ from whitted.reference.renderers.mitsuba.original import compare_structure
 from whitted.tracer import mitsuba_xml, spectra
 from whitted.tracer.mitsuba_xml import XMLImportError, read_xml
 
-ROOT = Path(__file__).resolve().parent.parent
+ROOT = Path(__file__).resolve().parents[2]
 CBOX = ROOT / "tests" / "data" / "real_scenes" / "mitsuba-data" / "scenes" / "cbox"
 UNLOCKED = [CBOX / "cbox.xml", CBOX / "cbox-spectral.xml"]
 

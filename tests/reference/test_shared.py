@@ -9,7 +9,7 @@ from whitted.reference import mutants
 from whitted.reference.shared import reused, shared
 from whitted.tracer import faults, load_scene
 
-SCENES = Path(__file__).resolve().parent.parent / "scenes"
+SCENES = Path(__file__).resolve().parents[2] / "scenes"
 #: a bug of the catalog (declared when reference.mutants is imported)
 BUG = "lambert-no-cosine"
 

@@ -14,7 +14,7 @@ import tomllib
 import zipfile
 from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
+ROOT = Path(__file__).resolve().parents[2]
 FOLDERS = {"tracer": "whitted.tracer", "reference": "whitted.reference",
            "scenes": "whitted.scenes"}
 

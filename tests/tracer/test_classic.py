@@ -343,7 +343,7 @@ def test_mitsubas_classic_bsdf_has_the_same_terms(mi):
 
 
 def test_the_glow_and_the_background_must_be_hit_terms_on_mitsubas_side_too(mi, monkeypatch):
-    # heckbert_minray agrees with Mitsuba (tests/test_cross_render.py). Counted the way
+    # heckbert_minray agrees with Mitsuba (tests/e2e/test_cross_render.py). Counted the way
     # Mitsuba counts emitters, at the last path segment too, the light spheres seen
     # after DEPTH reflections and the background behind them add light the classic
     # model's DEPTH excludes, and the comparison fails.

@@ -4,7 +4,7 @@ The sweep is the harness's power check: every plausible bug of the catalog,
 switched into the tracer in turn (tracer/faults.py), must make at least one
 built-in scene fail as ``whitted compare`` judges it, while the tracer as
 written passes every scene. It runs at the quick sizes (at most 64 pixels
-wide, 16 spp); ``python -m pytest -m slow tests/test_mutants.py`` runs it at the
+wide, 16 spp); ``python -m pytest -m slow tests/reference/test_mutants.py`` runs it at the
 scenes' own sizes.
 """
 
