@@ -32,10 +32,19 @@ conventions (:data:`CONVENTIONS`):
   tracer's render at twice the resolution), and a one-pixel shift (an
   off-by-one loop bound);
 * quantisation: 8-bit codes truncated instead of rounded (half a code low on
-  average under noise).
-
-Premultiplied alpha is not among them: the check's reader drops the alpha
-channel (``reference.check.images``), so the file's alpha is not at hand.
+  average under noise);
+* alpha: colours premultiplied by the file's alpha (Porter and Duff,
+  "Compositing Digital Images", SIGGRAPH 1984): a renderer that writes alpha 0
+  or partial alpha where rays miss or at edges and stores alpha x colour, so
+  the check reads A L. Tried only where the file has an alpha channel with
+  alpha < 1 somewhere (``UserImage.alpha``, read by ``reference.check.images``).
+  The premultiplication is modelled on linear light, before the file's curve:
+  an 8-bit sRGB PNG holds ``round(255 srgb(A L))``, not ``A round(255 srgb(L))``,
+  since compositing is linear in light and renderers (and OpenEXR, whose
+  colours are premultiplied linear values) multiply their linear buffer
+  before encoding it. The alpha the prediction uses is the file's own, after
+  its rounding (1/255 for 8-bit PNG: under an sRGB code's own step wherever
+  alpha > 0.2).
 
 Besides the named curves, :func:`monotone_fit` fits any monotone curve per
 channel (isotonic regression by pool-adjacent-violators over quantile bins
@@ -61,6 +70,9 @@ ROWS_SOURCE = ("PNG (ISO/IEC 15948:2004) section 4.5.2, PPM (netpbm): rows top t
                "pixels left to right, samples in R, G, B order")
 GRID_SOURCE = ("pbrt-v4 section 5.4 (Pharr, Jakob, Humphreys): pixel (x, y) covers "
                "[x, x + 1) x [y, y + 1); its centre is (x + 1/2, y + 1/2)")
+ALPHA_SOURCE = ("Porter and Duff, \"Compositing Digital Images\", SIGGRAPH 1984, section 2: "
+                "a premultiplied pixel stores (A R, A G, A B, A); PNG (ISO/IEC 15948:2004) "
+                "section 12.4 stores alpha straight (not premultiplied)")
 REINHARD_SOURCE = ("Reinhard, Stark, Shirley, Ferwerda, \"Photographic tone reproduction "
                    "for digital images\", SIGGRAPH 2002, eq. 3")
 
@@ -155,6 +167,9 @@ class Convention:
     parameters: int = 0
     #: catalog bugs that make this very image (tied with it whenever both are at the noise)
     same_as: tuple[str, ...] = ()
+    #: whether ``write`` needs the file's alpha (``params["alpha"]``, H x W x 1); tried only
+    #: where the file has one with alpha < 1 somewhere
+    uses_alpha: bool = False
 
 
 def _curve(fn: Callable[[np.ndarray, dict], np.ndarray]):
@@ -299,6 +314,12 @@ CONVENTIONS: tuple[Convention, ...] = (
                PNG_SOURCE + "; rounding to the nearest code",
                write=lambda x, enc, p: enc.encode(x) - 0.5 / enc.maxval,
                applies=lambda enc: enc.integer),
+    Convention("premultiplied-alpha", "alpha", "premultiplied alpha: colours multiplied by "
+               "the file's alpha (alpha < 1 where rays miss or at edges)",
+               lambda enc: enc.written("srgb(A L)" if enc.name == "srgb" else "A L"),
+               lambda enc: _encoded(enc) + " with A = 1, or the colours not multiplied by A "
+               "(the film's pixel holds all its light)", ALPHA_SOURCE,
+               write=lambda x, enc, p: enc.encode(p["alpha"] * x), uses_alpha=True),
 )
 
 #: The generic curve: not a named convention but a monotone fit (:func:`monotone_fit`).
@@ -341,14 +362,17 @@ def _through(f, x, s):
 
 
 def predict(conv: Convention, enc: FileEncoding, ref, user_image: np.ndarray,
-            weights: np.ndarray, valid: np.ndarray, fine: Callable[[], np.ndarray] | None
-            ) -> Prediction | None:
+            weights: np.ndarray, valid: np.ndarray, fine: Callable[[], np.ndarray] | None,
+            alpha: np.ndarray | None = None) -> Prediction | None:
     """The image a correct renderer writes under ``conv`` (None where it does not apply).
 
     ``ref`` is the check's :class:`~reference.check.judge.Reference`; ``fine``
-    returns the tracer's image at twice the film's size (for half-pixel shifts).
+    returns the tracer's image at twice the film's size (for half-pixel shifts);
+    ``alpha`` the file's alpha (H x W), for the conventions that use it.
     """
     if not conv.applies(enc):
+        return None
+    if conv.uses_alpha and (alpha is None or not (np.asarray(alpha) < 1).any()):
         return None
     r = np.asarray(ref.image, dtype=np.float64)
     var = ref.variance
@@ -372,9 +396,12 @@ def predict(conv: Convention, enc: FileEncoding, ref, user_image: np.ndarray,
     else:
         if conv.fit is not None:
             params = conv.fit(user_image, r, weights, valid, enc)
+        given = dict(params)        # the alpha plane stays out of the reported params
+        if conv.uses_alpha:
+            given["alpha"] = np.asarray(alpha, dtype=np.float64)[..., None]
 
         def f(x):
-            return enc.read(conv.write(x, enc, params))
+            return enc.read(conv.write(x, enc, given))
         image = f(r)
         var = None if var is None else _through(f, r, np.sqrt(var)) ** 2
         spread = None if spread is None else _through(f, r, np.sqrt(spread)) ** 2
@@ -529,7 +556,8 @@ def plot_curve(fit: MonotoneFit, enc: FileEncoding, path, named: Prediction | No
     grid = np.linspace(0, top, 200)
     lin = enc.decode(grid) if enc.name == "srgb" else grid
     ax.plot(grid, grid, color="#888", lw=1, ls=":", label="right (image = reference)")
-    if named is not None and named.convention.write is not None:
+    if named is not None and named.convention.write is not None and \
+            not named.convention.uses_alpha:     # per pixel, not one curve
         p = named.params or {}
         y = axis(enc.read(named.convention.write(lin, enc, p)))
         ax.plot(grid, y, color="black", lw=1, ls="--", label=named.convention.id)
@@ -550,13 +578,15 @@ def plot_curve(fit: MonotoneFit, enc: FileEncoding, path, named: Prediction | No
 
 def write_as(conv: Convention | None, linear: np.ndarray, enc: FileEncoding,
              params: dict | None = None, fine: np.ndarray | None = None,
-             truncate: bool = False):
+             truncate: bool = False, alpha: np.ndarray | None = None):
     """The :class:`~reference.check.images.UserImage` the check reads from a render written
     under ``conv`` (None: written right) into a file of encoding ``enc``.
 
     For the tests and the calibration (``benchmarks/bench_suspects.py``): ``linear``
     is the renderer's image, ``fine`` its render at twice the size (half-pixel
-    shifts). Integer files are rounded (truncated for ``truncated-codes``).
+    shifts). Integer files are rounded (truncated for ``truncated-codes``). ``alpha``
+    (H x W) is the file's alpha channel, stored as the file stores it; for
+    ``premultiplied-alpha`` without one, a ramp from 1 at the left to 1/4 at the right.
     """
     from pathlib import Path
 
@@ -564,6 +594,13 @@ def write_as(conv: Convention | None, linear: np.ndarray, enc: FileEncoding,
 
     x = np.asarray(linear, dtype=np.float64)
     p = dict(params or {"s": 0.5})
+    if alpha is None and conv is not None and conv.uses_alpha:
+        alpha = np.broadcast_to(np.linspace(1.0, 0.25, x.shape[1]), x.shape[:2])
+    if alpha is not None:
+        alpha = np.clip(np.asarray(alpha, dtype=np.float64), 0.0, 1.0)
+        if enc.integer:         # the alpha the file stores, which the writer multiplied by
+            alpha = np.round(alpha * enc.maxval) / enc.maxval
+        p["alpha"] = alpha[..., None]
     if conv is not None and conv.move is not None:
         x, unknown = conv.move(x)
         if unknown is not None:     # the writer's own pixels there: the nearest known ones
@@ -579,14 +616,17 @@ def write_as(conv: Convention | None, linear: np.ndarray, enc: FileEncoding,
     else:
         e = enc.encode(x)
     if not enc.integer:
-        return UserImage("<written>", "exr", "float32", e.astype(np.float32).astype(np.float64))
+        return UserImage("<written>", "exr", "float32", e.astype(np.float32).astype(np.float64),
+                         alpha=alpha)
     scale = 255 if enc.name == "minray" else enc.maxval
     v = np.maximum(e, 0) * scale
     if enc.clip is not None:
         v = np.minimum(v, scale * enc.clip)
     codes = (np.floor(v) if truncate else np.round(v)).astype(np.int64)
-    return _integer_image(Path("<written>"), "png", codes, enc.maxval, enc.name,
-                          "16-bit" if enc.maxval > 255 else "8-bit", [])
+    img = _integer_image(Path("<written>"), "png", codes, enc.maxval, enc.name,
+                         "16-bit" if enc.maxval > 255 else "8-bit", [])
+    img.alpha = alpha
+    return img
 
 
 def _fill(x: np.ndarray, unknown: np.ndarray) -> np.ndarray:

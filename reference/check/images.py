@@ -15,6 +15,13 @@ Which library reads what, and why:
   Heckbert's minray, which prints values above 255 (colours above 1);
   netpbm-style readers (Pillow, Mitsuba) refuse or clip them.
 
+Alpha. Where the file has an alpha channel (PNG RGBA or grey + alpha, an
+EXR's ``A``) it is read into :attr:`UserImage.alpha` (PNG alpha is linear,
+code / maxval, whatever the colours' encoding: PNG spec section 12.4) and
+not applied: the colours are judged as stored, and a writer that multiplied
+them by alpha is the "premultiplied alpha" convention of
+:mod:`reference.check.conventions`. Images without alpha read as before.
+
 The format is told from the file's first bytes, not its name, so that a
 text file called ``x.png`` is "not an image" rather than a broken PNG.
 
@@ -82,8 +89,10 @@ class UserImage:
     saturated: np.ndarray | None = None
     #: ``--encoding`` for 8-bit files, else None
     encoding: str | None = None
-    #: notes for the user (an alpha channel ignored, a grey image widened)
+    #: notes for the user (an alpha channel not applied, a grey image widened)
     notes: tuple[str, ...] = ()
+    #: H x W alpha in [0, 1] (PNG RGBA / grey + alpha, EXR ``A``), None where the file has none
+    alpha: np.ndarray | None = None
 
     @property
     def size(self) -> tuple[int, int]:
@@ -162,13 +171,22 @@ def read_user_image(path: str | Path, encoding: str | None = None) -> UserImage:
     return img
 
 
-def _rgb(a: np.ndarray, notes: list[str], what: str) -> np.ndarray:
+ALPHA_NOTE = ("the image's alpha channel is not applied: its colours are judged as stored "
+              "(premultiplied alpha is tried as a cause)")
+
+
+def _alpha_plane(a: np.ndarray) -> np.ndarray | None:
+    """The last channel of grey + alpha or RGBA (H x W), else None."""
+    return a[..., -1] if a.ndim == 3 and a.shape[-1] in (2, 4) else None
+
+
+def _rgb(a: np.ndarray, notes: list[str], what: str, keep_alpha: bool = False) -> np.ndarray:
     """H x W x 3 from grey (H x W or H x W x 1), grey + alpha, RGB or RGBA."""
     if a.ndim == 2:
         a = a[..., None]
     n = a.shape[-1]
     if n in (2, 4):
-        notes.append(f"the {what}'s alpha channel is ignored")
+        notes.append(ALPHA_NOTE if keep_alpha else f"the {what}'s alpha channel is ignored")
         a = a[..., :n - 1]
     if a.shape[-1] == 1:
         notes.append(f"the {what} is grey: its value is used for R, G and B")
@@ -213,8 +231,13 @@ def _read_exr(p: Path, fmt: str, encoding: str) -> UserImage:
     if variance is not None and not (np.isfinite(variance).all() and (variance >= 0).all()):
         raise UserError(f"{p}: its variance layer has negative or non-finite values")
     notes = ("Y channel used for R, G and B",) if "R" not in names else ()
+    alpha = None
+    if "A" in names:
+        a = channels["A"].astype(np.float64)
+        alpha = np.clip(np.where(np.isfinite(a), a, 1.0), 0.0, 1.0)
+        notes += (ALPHA_NOTE,)
     return UserImage(str(p), fmt, "half" if half else "float32", image, step, variance,
-                     notes=notes)
+                     notes=notes, alpha=alpha)
 
 
 def _bitmap_array(p: Path, fmt: str):
@@ -289,10 +312,14 @@ def _integer_image(p: Path, fmt: str, codes: np.ndarray, maxval: int, encoding: 
 def _read_png(p: Path, fmt: str, encoding: str) -> UserImage:
     a = _bitmap_array(p, fmt)
     notes: list[str] = []
-    codes = _rgb(a, notes, "image")
+    codes = _rgb(a, notes, "image", keep_alpha=True)
     maxval = 65535 if codes.dtype == np.uint16 else 255
-    return _integer_image(p, fmt, codes.astype(np.int64), maxval, encoding,
-                          "16-bit" if maxval > 255 else "8-bit", notes)
+    img = _integer_image(p, fmt, codes.astype(np.int64), maxval, encoding,
+                         "16-bit" if maxval > 255 else "8-bit", notes)
+    alpha = _alpha_plane(a)
+    if alpha is not None:       # linear whatever the colours' encoding (PNG spec 12.4)
+        img.alpha = np.clip(alpha.astype(np.float64) / maxval, 0.0, 1.0)
+    return img
 
 
 def _read_ppm(p: Path, fmt: str, encoding: str) -> UserImage:

@@ -617,7 +617,7 @@ def name_cause(user, ref, result, material_ids=None, material_names=None,
     enc = cv.file_encoding(user)
     hyps: list[_Hypothesis] = []
     for c in cv.CONVENTIONS:
-        p = cv.predict(c, enc, ref, u, w0, valid, fine)
+        p = cv.predict(c, enc, ref, u, w0, valid, fine, getattr(user, "alpha", None))
         if p is None:
             continue
         fit = SuspectFit(c.id, p.formula, c.kind, 0.0, float(p.params.get("s", 1.0)), 0.0,

@@ -160,3 +160,80 @@ def test_half_pixel_shift_is_the_box_moved_by_half_a_pixel():
     assert out.shape == (4, 6, 3)
     assert out[0, 0, 0] == fine[1:3, 1:3, 0].mean()
     assert unknown[-1].all() and unknown[:, -1].all() and not unknown[0, 0]
+
+
+def _rgba_png(path, linear, alpha, premultiplied):
+    """An 8-bit sRGB PNG with straight 8-bit alpha, colours multiplied by it on linear light."""
+    from whitted.reference import mitsuba
+    from whitted.reference.check.conventions import srgb_encode
+
+    mi = mitsuba()
+    a = np.round(alpha * 255) / 255                      # the alpha the file stores
+    x = np.maximum(linear, 0) * (a[..., None] if premultiplied else 1.0)
+    codes = np.round(np.clip(srgb_encode(x), 0, 1) * 255).astype(np.uint8)
+    rgba = np.concatenate([codes, np.round(a * 255).astype(np.uint8)[..., None]], axis=-1)
+    mi.Bitmap(np.ascontiguousarray(rgba), mi.Bitmap.PixelFormat.RGBA).write(str(path))
+    return path
+
+
+def _partial_alpha(h, w):
+    """Alpha 1 on the left, a ramp down to 0.3 on the right half, 0 in a top-right block."""
+    alpha = np.ones((h, w))
+    alpha[:, w // 2:] = np.linspace(1.0, 0.3, w - w // 2)
+    alpha[:10, -16:] = 0.0
+    return alpha
+
+
+def test_premultiplied_alpha_png_is_named_and_alpha_one_passes(tmp_path, glass):
+    from whitted.reference.check.images import read_user_image
+
+    scene, ref, img, _ = glass
+    h, w = img.shape[:2]
+    alpha = _partial_alpha(h, w)
+    user = read_user_image(_rgba_png(tmp_path / "pre.png", img, alpha, True))
+    assert user.alpha is not None and user.alpha.min() == 0 and (user.alpha < 1).mean() > 0.3
+    run = check_image(user, scene, reference=ref)
+    assert not run.passed
+    first, sp = _first(run)
+    text = format_run(run, "premultiplied")
+    assert sp["named"], text
+    assert first["id"] == "premultiplied-alpha" and first["kind"] == "convention", text
+    assert first["at_noise"] and first["family"] == "alpha"
+    assert first["formula"] == "code = round(255 * srgb(A L))"
+    assert "Porter and Duff" in first["source"] and first["correct"]
+    assert "your light transport agrees" in sp["cause"]
+    assert "premultiplied alpha" in sp["cause"]
+    # the same colours with alpha 1 everywhere: a correct image, as before
+    one = read_user_image(_rgba_png(tmp_path / "one.png", img, np.ones((h, w)), True))
+    run = check_image(one, scene, reference=ref)
+    assert run.passed, format_run(run, "alpha 1")
+    assert run.suspects is None
+
+
+def test_an_image_without_alpha_reads_as_before(tmp_path, glass):
+    from whitted.reference import mitsuba
+    from whitted.reference.check.images import ALPHA_NOTE, read_user_image
+
+    _, _, img, _ = glass
+    mi = mitsuba()
+    rgba = _rgba_png(tmp_path / "rgba.png", img, np.ones(img.shape[:2]), False)
+    codes = np.array(mi.Bitmap(str(rgba)))[..., :3]
+    mi.Bitmap(np.ascontiguousarray(codes), mi.Bitmap.PixelFormat.RGB).write(
+        str(tmp_path / "rgb.png"))
+    a, b = read_user_image(rgba), read_user_image(tmp_path / "rgb.png")
+    assert b.alpha is None and b.notes == () and a.notes == (ALPHA_NOTE,)
+    assert np.array_equal(a.image, b.image) and np.array_equal(a.step, b.step)
+    assert (a.alpha == 1).all()
+    # and the convention is not tried without alpha below 1
+    conv = cv.get("premultiplied-alpha")
+    for alpha in (None, a.alpha):
+        assert cv.predict(conv, SRGB8, None, b.image, None, None, None, alpha) is None
+
+
+def test_write_as_premultiplied_alpha_is_named(glass):
+    scene, ref, img, _ = glass
+    for enc in (SRGB8, FLOAT):
+        run = check_image(cv.write_as(cv.get("premultiplied-alpha"), img, enc), scene,
+                          reference=ref)
+        first, sp = _first(run)
+        assert first["id"] == "premultiplied-alpha", format_run(run, enc.name)
