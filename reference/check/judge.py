@@ -718,7 +718,8 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
         say("judging the conventions and the bugs: which leaves only noise")
         run.suspects = ranking.to_json() | name_cause(
             user, reference, result, ids, names, ranking,
-            lambda: fine_image(scene, reference, seed))
+            lambda: fine_image(scene, reference, seed), judge_image=judge_image,
+            reference_type=Reference)
         run.suspects["seconds"] = time.perf_counter() - t0
     run.seconds = time.perf_counter() - start
     return run

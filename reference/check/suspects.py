@@ -584,7 +584,8 @@ def _difference_beyond_noise(x: np.ndarray, sd: np.ndarray, use: np.ndarray) -> 
 
 def name_cause(user, ref, result, material_ids=None, material_names=None,
                ranking: SuspectRanking | None = None, fine: Callable | None = None,
-               log: Callable[[str], None] | None = None) -> dict:
+               log: Callable[[str], None] | None = None, *, judge_image: Callable,
+               reference_type: type) -> dict:
     """Name what makes a failing image differ, or say that nothing known does.
 
     The hypotheses: each convention of :mod:`reference.check.conventions`
@@ -607,7 +608,10 @@ def name_cause(user, ref, result, material_ids=None, material_names=None,
     no region dominates by its brightness squared).
     """
     from whitted.reference.check import conventions as cv
-    from whitted.reference.check.judge import Reference, judge_image
+
+    # The check's own rules are handed in by reference.check.judge, which calls this:
+    # judging sits above naming, and this module never imports it.
+    Reference = reference_type
 
     a = result.arrays
     u, r = a["image"], a["reference"]

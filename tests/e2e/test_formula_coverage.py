@@ -8,7 +8,7 @@ with moments where lights are sampled), its image written as PNG, PPM and EXR; t
 report's imported Mitsuba scenes (``imported_cases(quick=True)``), read by
 :mod:`tracer.mitsuba_xml` and rendered as the report renders them. It measures the code
 that builds the kernels (:data:`MEASURED`): a line no scene reaches fails the test,
-unless ``tests/data/coverage_allowed.toml`` lists it with the reason and the test that
+unless ``tests/e2e/coverage_allowed.toml`` lists it with the reason and the test that
 reaches it instead.
 
 Why coverage.py rather than a tracer of our own (``sys.settrace``): it is the field's
@@ -46,7 +46,7 @@ import tomllib
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
-ALLOWED = ROOT / "tests" / "data" / "coverage_allowed.toml"
+ALLOWED = Path(__file__).resolve().parent / "coverage_allowed.toml"
 
 #: samples per pixel at most (the report's quick sizes, fewer samples: a line is reached
 #: or not whatever the count; 4 = 2 x 2 strata, so stratification still runs)

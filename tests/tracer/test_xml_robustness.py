@@ -98,7 +98,7 @@ BAD_VALUES = [
     ({"EXTRA": '<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
                'value="400:1:2"/></bsdf></shape>'}, [], ["wavelength:value pairs"]),
     ({"EXTRA": '<shape type="sphere"><bsdf type="diffuse"><spectrum name="reflectance" '
-               'value=""/></bsdf></shape>'}, [], ["spectrum", "expected 3 numbers"]),
+               'value=""/></bsdf></shape>'}, [], ["spectrum", "at least two pairs"]),
 ]
 
 

@@ -290,8 +290,13 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
             lines += [f'{pad}    <transform name="{k}">',
                       f'{pad}        <scale x="{_fmt(val[0])}" y="{_fmt(val[1])}"/>',
                       f"{pad}    </transform>"]
-        elif kind == "uvmatrix":   # a 3x3 matrix: Mitsuba's XML takes it for to_uv
-            flat = " ".join(_fmt(x) for row in val for x in row)
+        elif kind == "uvmatrix":
+            # Written as a 4x4 with the 2D translation in the last column: Mitsuba 3.9.1
+            # reads a 3x3 <matrix> into the upper-left of a 4x4 and then takes to_uv's
+            # translation from the last column, so a 3x3's translation would be lost.
+            (a, b, c), (d, e, f) = val[0], val[1]
+            m4 = ((a, b, 0.0, c), (d, e, 0.0, f), (0.0, 0.0, 1.0, 0.0), (0.0, 0.0, 0.0, 1.0))
+            flat = " ".join(_fmt(x) for row in m4 for x in row)
             lines += [f'{pad}    <transform name="{k}">', f'{pad}        <matrix value="{flat}"/>',
                       f"{pad}    </transform>"]
         elif kind in ("point", "vector"):
