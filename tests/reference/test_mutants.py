@@ -157,8 +157,10 @@ def test_every_bug_is_caught_and_the_tracer_as_written_passes_every_scene():
     assert not [m.errors for m in result.mutants if m.errors], report
     for m in result.mutants:
         assert all(c.margin > 1 for c in m.caught_by)
-        if mutants.BY_ID[m.id].shared:     # seen only by the one-lobe reference
-            assert {c.verdict for c in m.caught_by} == {"second opinion"}
+        if mutants.BY_ID[m.id].shared:     # seen only by the one-lobe reference: as the
+            # second opinion, or as the main verdict of a scene it judges (shape_lights)
+            assert {c.verdict for c in m.caught_by} <= {"second opinion", "onelobe"}
+            assert "second opinion" in {c.verdict for c in m.caught_by}
     # The report's section renders the same result.
     data = result.to_json()
     assert "NOT CAUGHT" not in _mutants_markdown(data)
