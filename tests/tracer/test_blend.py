@@ -172,3 +172,42 @@ def test_twosided_around_each_reflecting_kind_agrees_with_mitsuba(tmp_path, inne
                         "</scene>")
     s = compare_structure(p)
     assert s.agrees and s.unchecked is None, "\n".join(s.lines())
+
+
+@pytest.mark.parametrize("part, words", [
+    ('{ type = "diffuse", reflectance = 0.5, two_sided = true }', "give two_sided on the blend"),
+    ('{ type = "phong", diffuse = 0.3, specular = 0.2, ambient = 0.1 }', "no ambient term")])
+def test_a_blends_parts_refuse_what_the_blend_decides(tmp_path, part, words):
+    """The parts of a TOML blend take neither two_sided (the blend as a whole is one- or
+    two-sided, as Mitsuba's twosided around blendbsdf) nor a Phong ambient term."""
+    from whitted.tracer import load_scene
+    from whitted.tracer.errors import SceneError
+
+    path = tmp_path / "b.toml"
+    path.write_text(f"""
+[film]
+width = 8
+height = 6
+
+[camera]
+origin = [0, 0, 5]
+target = [0, 0, 0]
+
+[materials.m]
+type = "blend"
+first = {part}
+second = {{ type = "diffuse", reflectance = 0.2 }}
+
+[[lights]]
+type = "point"
+position = [0, 3, 3]
+intensity = 10
+
+[[shapes]]
+type = "sphere"
+center = [0, 0, 0]
+radius = 1
+material = "m"
+""")
+    with pytest.raises(SceneError, match=words):
+        load_scene(path)
