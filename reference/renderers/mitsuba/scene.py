@@ -277,6 +277,8 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
                 lines += _xml(v, "shape", indent + 1, meshes, mesh_prefix=mesh_prefix)
             elif k in _CHILD_TAGS:
                 lines += _xml(v, _CHILD_TAGS[k], indent + 1, meshes, mesh_prefix=mesh_prefix)
+            elif k.startswith(("bsdf_", "brdf_")):   # nested BSDFs: blendbsdf's two, ...
+                lines += _xml(v, "bsdf", indent + 1, meshes, name=k, mesh_prefix=mesh_prefix)
             else:  # a texture given for a parameter, e.g. reflectance
                 lines += _xml(v, "texture", indent + 1, meshes, name=k,
                               mesh_prefix=mesh_prefix)
