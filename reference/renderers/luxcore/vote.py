@@ -329,6 +329,7 @@ def start_three(scenes: list, quick: bool = False, nice: int = 0) -> Started:
     """
     from whitted.reference.renderers.luxcore import render as luxcore
     from whitted.reference.renderers.luxcore.scene import describe
+    from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
     from whitted.reference.verdicts.compare import comparable
     from whitted.tracer.errors import UserError
 
@@ -336,6 +337,12 @@ def start_three(scenes: list, quick: bool = False, nice: int = 0) -> Started:
     why = []
     for s in small:
         reason = not_comparable(s)
+        if reason is None and not shares_light_samples(s):
+            # Mitsuba's side of the vote is the deterministic reference, which samples
+            # lights as the tracer does only where it has their sample maps
+            reason = ("an emitter has no shared light samples (a mesh, polygon or cylinder "
+                      "light): Mitsuba's side of the vote cannot be the deterministic "
+                      "reference")
         if reason is None:
             try:
                 describe(s)
