@@ -49,7 +49,6 @@ from __future__ import annotations
 import contextlib
 import os
 import re
-import stat
 import struct
 import sys
 import tempfile
@@ -59,6 +58,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from whitted.tracer.errors import UserError
+from whitted.tracer.files import special_kind
 
 #: Formats by their first bytes (the magic numbers of their specifications).
 MAGIC = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"PF", "pfm"), (b"Pf", "pfm"),
@@ -134,11 +134,10 @@ def regular_file_size(path: str | Path) -> int:
         raise ImageError(path, "cannot read: No such file or directory") from None
     except (OSError, ValueError) as e:  # too long, a loop of links, a NUL in the name, ...
         raise ImageError(path, f"cannot read: {getattr(e, 'strerror', None) or e}") from None
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(st)
+    if kind == "a folder":
         raise ImageError(path, "is a folder, expected an image file")
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
-                if stat.S_ISSOCK(st.st_mode) else "a device")
+    if kind is not None:
         raise ImageError(path, f"is {kind}, expected a regular file (an image)")
     return st.st_size
 

@@ -68,7 +68,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import stat
 import struct
 import sys
 import warnings
@@ -79,6 +78,7 @@ from pathlib import Path
 import numpy as np
 
 from whitted.tracer.errors import UserError
+from whitted.tracer.files import special_kind
 
 __all__ = ["CACHE_MAX_BYTES", "CACHE_MAX_MESHES", "MeshData", "MeshError", "clear_cache",
            "compute_vertex_normals", "face_normals", "load_mesh"]
@@ -236,11 +236,10 @@ def _stat_regular(path: Path) -> os.stat_result:
     except (OSError, ValueError) as e:  # too long, a loop of links, a NUL in the name, ...
         raise MeshError(path, f"cannot read the mesh file ({getattr(e, 'strerror', None) or e})"
                         ) from None
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(st)
+    if kind == "a folder":
         raise MeshError(path, "is a folder, expected a mesh file")
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
-                if stat.S_ISSOCK(st.st_mode) else "a device")
+    if kind is not None:
         raise MeshError(path, f"is {kind}, expected a regular file (an OBJ or PLY mesh)")
     return st
 

@@ -46,7 +46,6 @@ from __future__ import annotations
 import math
 import os
 import re
-import stat
 import xml.parsers.expat
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +55,7 @@ import numpy as np
 from whitted.tracer import spectra
 from whitted.tracer import transform as tf
 from whitted.tracer.errors import UserError
+from whitted.tracer.files import NotRegularFile, read_regular, special_kind
 from whitted.tracer.limits import MAX_INCLUDES, MAX_SCENE_BYTES, refuse
 from whitted.tracer.mitsuba_ior import IOR
 
@@ -141,12 +141,11 @@ def regular_file(path: Path, what: str, where: str) -> tuple[Path, os.stat_resul
     except (OSError, ValueError) as e:  # a loop of links, a name too long, a NUL in it
         raise XMLImportError(f"{where}: cannot read {subject or 'it '}"
                              f"({getattr(e, 'strerror', None) or e})") from None
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(st)
+    if kind == "a folder":
         raise XMLImportError(f"{where}: {subject}is a folder, expected "
                              f"{'a file' if subject else 'a Mitsuba .xml scene'}")
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a socket"
-                if stat.S_ISSOCK(st.st_mode) else "a device")
+    if kind is not None:
         raise XMLImportError(f"{where}: {subject}is {kind}, expected a regular file")
     return real, st
 
@@ -185,13 +184,9 @@ class _Budget:
             self._too_big(where)
         subject = f"{what} {_cut(path)}" if what else "it"
         try:
-            # Non-blocking: a FIFO swapped in after the check must not hang the open.
-            fd = os.open(real, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0)
-                         | getattr(os, "O_CLOEXEC", 0))
-            with os.fdopen(fd, "rb") as f:
-                if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                    raise XMLImportError(f"{where}: {subject} is no longer a regular file")
-                data = f.read(self.bytes_left + 1)
+            data = read_regular(real, self.bytes_left)
+        except NotRegularFile:
+            raise XMLImportError(f"{where}: {subject} is no longer a regular file") from None
         except OSError as e:
             raise XMLImportError(f"{where}: cannot read {subject} ({e.strerror or e})") \
                 from None

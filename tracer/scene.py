@@ -322,18 +322,14 @@ MAX_NESTING = 16
 
 def _read_scene_bytes(path: str) -> bytes:
     """The file's bytes: a regular file no larger than the limit (no FIFO, no device)."""
-    import stat
-
+    from whitted.tracer.files import special_kind
     from whitted.tracer.limits import MAX_SCENE_BYTES, refuse
 
     limit = MAX_SCENE_BYTES.value()
-    st = os.stat(path)
-    if stat.S_ISDIR(st.st_mode):
+    kind = special_kind(os.stat(path))
+    if kind == "a folder":
         raise IsADirectoryError
-    if not stat.S_ISREG(st.st_mode):
-        kind = ("a FIFO" if stat.S_ISFIFO(st.st_mode) else "a device"
-                if stat.S_ISCHR(st.st_mode) or stat.S_ISBLK(st.st_mode) else "a socket"
-                if stat.S_ISSOCK(st.st_mode) else "not a file")
+    if kind is not None:
         raise SceneError(path, "", f"is {kind}, expected a regular file (a .toml scene)")
     with open(path, "rb") as f:
         data = f.read(limit + 1)  # a file may grow, or report a wrong size

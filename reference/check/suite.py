@@ -41,12 +41,13 @@ import math
 import os
 import re
 import shutil
-import stat
 import tempfile
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
 import numpy as np
+
+from whitted.tracer.files import NotRegularFile, read_regular, special_kind
 
 #: The formulas each kind stands for, with the lecture topic it belongs to (the lectures'
 #: slide titles: radiometry, BRDFs, Fresnel, Snell, intersections, cameras, shadows,
@@ -208,7 +209,7 @@ def _regular_file(path: Path, what: str, limit: int) -> os.stat_result:
         st = os.stat(path)
     except OSError as e:
         raise UserError(f"{path}: cannot read {what}: {e.strerror or e}") from None
-    if not stat.S_ISREG(st.st_mode):
+    if special_kind(st) is not None:
         raise UserError(f"{path}: not a regular file ({what})")
     if st.st_size > limit:
         raise UserError(f"{path}: larger than {limit:,} bytes ({what})")
@@ -393,11 +394,9 @@ def read_bounded(path: Path, limit: int, what: str) -> bytes:
 
     _regular_file(path, what, limit)
     try:
-        fd = os.open(path, os.O_RDONLY | os.O_NONBLOCK)
-        with os.fdopen(fd, "rb") as f:
-            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
-                raise UserError(f"{path}: not a regular file ({what})")
-            data = f.read(limit + 1)
+        data = read_regular(path, limit)
+    except NotRegularFile:
+        raise UserError(f"{path}: not a regular file ({what})") from None
     except OSError as e:
         raise UserError(f"{path}: cannot read {what}: {e.strerror or e}") from None
     if len(data) > limit:
