@@ -1,21 +1,9 @@
 """The JSON Schema of the TOML scene format, derived from the loader itself.
 
 :func:`scene_schema` runs the loader's own parsers (``tracer/scene.py`` and
-every kind's ``parse`` in ``tracer/materials/`` and ``tracer/emitters/``) on a
-*recording* table (:mod:`tracer.settings_schema`, which does the recording
-and merging), instead of a scene. Each key a parser
-reads goes through one of the ``Table`` helpers (``number``, ``color``,
-``vec3``, ``string``, ``table``, ...), and each helper hands
-``Table.raw`` the JSON Schema of the values it accepts; the recorder notes
-the key, that schema, its default and whether it was required, and answers
-with a plausible value so that the parser goes on to its next key. Where a
-parser branches (on a ``type``, on whether a key is present, on a colour
-against a texture, on which kind of ``to_world`` step), the recorder takes
-each branch in turn, re-running the parser until every combination of its
-answers has been seen. The runs are merged into one schema: the keys read in
-any run of a table are its properties, the keys read without a default in
-every run are required, and runs that chose different ``type``s become the
-variants of a ``oneOf``, each with ``type`` as its constant.
+every kind's ``parse`` in ``tracer/materials/``, ``tracer/emitters/`` and
+``tracer/shapes/``) on a *recording* table instead of a scene; how the recording
+takes each branch and merges the runs is :mod:`tracer.settings_schema`'s.
 
 So there is no second list of keys: a kind that reads a new key appears in
 the schema as soon as its parser reads it. The schema is laxer than the
