@@ -71,15 +71,15 @@ class XMLImportError(UserError):
     """A Mitsuba XML scene outside the subset, or malformed; names the file, line and element."""
 
 
-def _short(value) -> str:
+def shown_value(value) -> str:
     """A value as a message echoes it: cut to VALUE_SHOWN characters, with an ellipsis."""
     text = str(value)
     return text if len(text) <= VALUE_SHOWN else text[:VALUE_SHOWN - 3] + "..."
 
 
 def _cut(value) -> str:
-    """:func:`_short`, quoted."""
-    return repr(_short(value))
+    """:func:`shown_value`, quoted."""
+    return repr(shown_value(value))
 
 
 @dataclass
@@ -95,9 +95,9 @@ class Node:
         return self.attrs.get("type", "")
 
     def where(self) -> str:
-        t = f' type="{_short(self.type)}"' if self.type else ""
-        n = f' name="{_short(self.attrs["name"])}"' if "name" in self.attrs else ""
-        return f"{self.file}:{self.line}: <{_short(self.tag)}{t}{n}>"
+        t = f' type="{shown_value(self.type)}"' if self.type else ""
+        n = f' name="{shown_value(self.attrs["name"])}"' if "name" in self.attrs else ""
+        return f"{self.file}:{self.line}: <{shown_value(self.tag)}{t}{n}>"
 
 
 @dataclass
@@ -226,7 +226,7 @@ def _parse_file(path: Path, data: bytes) -> Node:
                              f"({xml.parsers.expat.ErrorString(e.code)})") from None
     except (LookupError, ValueError) as e:  # encoding="..." that Python does not know
         raise XMLImportError(f"{path}: unsupported XML encoding declaration "
-                             f"({_short(e)})") from None
+                             f"({shown_value(e)})") from None
     if len(root.children) != 1 or root.children[0].tag != "scene":
         raise XMLImportError(f"{path}: expected a Mitsuba scene (<scene version=...>) as the "
                              "root element")
@@ -251,7 +251,7 @@ class _Resolver:
         for k, v in node.attrs.items():
             def repl(m, node=node):
                 if m.group(1) not in self.params:
-                    raise XMLImportError(f"{node.where()}: ${_short(m.group(1))} has no "
+                    raise XMLImportError(f"{node.where()}: ${shown_value(m.group(1))} has no "
                                          f"value (no <default> of that name and none given)")
                 return str(self.params[m.group(1)])
             node.attrs[k] = _PARAM.sub(repl, v)
@@ -310,7 +310,7 @@ class _Resolver:
             (d / p for d in self.search if os.path.lexists(d / p)), None)
         if found is None:
             raise XMLImportError(f"{node.where()}: {what} {_cut(name)} not found (searched "
-                                 + ", ".join(_short(d) for d in self.search[:4])
+                                 + ", ".join(shown_value(d) for d in self.search[:4])
                                  + (", ..." if len(self.search) > 4 else "") + ")")
         return regular_file(found, what, node.where())[0]
 
@@ -619,7 +619,7 @@ class _Importer:
         by the property it gives (:data:`SPECTRUM_KINDS`)."""
         if "filename" in node.attrs or node.type:
             what = "a spectrum from a file" if "filename" in node.attrs else \
-                f'a spectrum plugin "{_short(node.type)}"'
+                f'a spectrum plugin "{shown_value(node.type)}"'
             self.outside(node, f"{what} (spectral-only input)", None, where)
         kind = SPECTRUM_KINDS.get(node.attrs.get("name", ""), spectra.REFLECTANCE)
         try:
@@ -662,7 +662,7 @@ class _Importer:
                 if rows != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]:
                     bm["to_uv"] = rows
             return {"bitmap": bm}
-        self.outside(node, f'texture "{_short(node.type)}"', None, where)
+        self.outside(node, f'texture "{shown_value(node.type)}"', None, where)
 
     def to_world(self, node: Node | None) -> list:
         """A to_world as a list of steps: the XML's own translate/rotate/scale steps in its
@@ -782,7 +782,7 @@ class _Importer:
                 self.note("film", "Mitsuba's path integrator also follows diffuse bounces; "
                                   "Whitted's tracer follows only specular ones")
         else:
-            self.outside(node, f'integrator "{_short(node.type)}"',
+            self.outside(node, f'integrator "{shown_value(node.type)}"',
                          "Whitted's (max_depth as given)", "film")
             film["max_depth"] = self.integer(p.get("max_depth"), 2)
 
@@ -796,7 +796,7 @@ class _Importer:
                          "camera")
             kind = "perspective"
         if kind not in ("perspective", "orthographic"):
-            self.outside(node, f'sensor "{_short(kind)}"', None, "camera")
+            self.outside(node, f'sensor "{shown_value(kind)}"', None, "camera")
         cam["type"] = kind
         film = [c for c in node.children if c.tag == "film"]
         sampler = [c for c in node.children if c.tag == "sampler"]
@@ -845,7 +845,7 @@ class _Importer:
         if node is not None:
             self.origins["film"] = node.where()
         if node is not None and node.type != "hdrfilm":
-            self.outside(node, f'film "{_short(node.type)}"', "hdrfilm", "film")
+            self.outside(node, f'film "{shown_value(node.type)}"', "hdrfilm", "film")
         film["width"] = self.integer(p.get("width"), 768)
         film["height"] = self.integer(p.get("height"), 576)
         for k in ("crop_width", "crop_height", "crop_offset_x", "crop_offset_y"):
@@ -864,8 +864,8 @@ class _Importer:
                 film["radius"] = float(radius)
         else:
             if rtype != "gaussian":
-                self.outside(rf[0], f'pixel filter "{_short(rtype)}"', "a gaussian (stddev 0.5)",
-                             "film")
+                self.outside(rf[0], f'pixel filter "{shown_value(rtype)}"',
+                             "a gaussian (stddev 0.5)", "film")
             film["filter"] = "gaussian"
             stddev = self.number(self.props(rf[0]).get("stddev"), 0.5) if rf and \
                 rtype == "gaussian" else 0.5
@@ -889,7 +889,7 @@ class _Importer:
             film["jitter"] = bool(self.boolean(p.get("jitter"), True))
         else:
             film["jitter"] = True
-            self.note("film", f'sampler "{_short(kind)}": jittered strata (the same expected '
+            self.note("film", f'sampler "{shown_value(kind)}": jittered strata (the same expected '
                               "image, another noise)")
 
     # -------------------------------------------------------------- BSDFs
@@ -917,9 +917,9 @@ class _Importer:
         if kind in APPROXIMATIONS and APPROXIMATIONS[kind] is not None:
             nearest, lost = APPROXIMATIONS[kind]
             if nearest == "inner":
-                self.outside(node, f'a "{_short(kind)}" BSDF', "the BSDF it wraps", where)
+                self.outside(node, f'a "{shown_value(kind)}" BSDF', "the BSDF it wraps", where)
                 return self.bsdf(self._inner(node), where, two_sided)
-            self.outside(node, f'a "{_short(kind)}" BSDF ({lost.split(" (")[0]} lost)',
+            self.outside(node, f'a "{shown_value(kind)}" BSDF ({lost.split(" (")[0]} lost)',
                          f'a smooth "{nearest}"', where)
             if nearest == "diffuse":
                 colour = p.get("base_color") or p.get("reflectance")
@@ -928,7 +928,7 @@ class _Importer:
                                    two_sided)
             kind = nearest
         if kind not in BSDFS:
-            self.outside(node, f'a "{_short(kind)}" BSDF', None, where)
+            self.outside(node, f'a "{shown_value(kind)}" BSDF', None, where)
         return getattr(self, BSDFS[kind])(node, p, where, two_sided)
 
     def _inner(self, node: Node) -> Node:
@@ -947,7 +947,7 @@ class _Importer:
         # component can be nested!"), and with allow_transmission reads the back side as
         # the front, which a dielectric or a mask is not: refused here either way.
         if nested.type in ("dielectric", "thindielectric", "mask"):
-            self.outside(node, f'a twosided around "{_short(nested.type)}" (a BSDF with '
+            self.outside(node, f'a twosided around "{shown_value(nested.type)}" (a BSDF with '
                                "transmission, which Mitsuba's twosided refuses)", None, where)
         return self.bsdf(nested, where, two_sided=True)
 
@@ -1033,11 +1033,11 @@ class _Importer:
         smooth = ("diffuse", "whitted_phong")
         reason = None
         if weight.tag not in ("float", "integer"):
-            reason = f"a weight given as <{_short(weight.tag)}>, not one number"
+            reason = f"a weight given as <{shown_value(weight.tag)}>, not one number"
         elif not 0 <= self.number(weight) <= 1:
             reason = "a weight outside [0, 1]"
         elif any(b.type not in smooth for b in inner):
-            kinds = ", ".join(f'"{_short(b.type)}"' for b in inner if b.type not in smooth)
+            kinds = ", ".join(f'"{shown_value(b.type)}"' for b in inner if b.type not in smooth)
             reason = (f"a blend of {kinds}: only smooth BSDFs (diffuse, whitted_phong) are "
                       "blended, not delta lobes or wrappers")
         if reason is not None:
@@ -1074,7 +1074,7 @@ class _Importer:
             self.loose_area.append(node)
             return
         if node.type not in LIGHTS:
-            self.outside(node, f'emitter "{_short(node.type)}"', None, where)
+            self.outside(node, f'emitter "{shown_value(node.type)}"', None, where)
         self.origins[where] = node.where()
         m = transform_matrix(p["to_world"]) if "to_world" in p else np.eye(4)
         self.out["lights"].append(getattr(self, LIGHTS[node.type])(node, p, m, where))
@@ -1147,7 +1147,7 @@ class _Importer:
             return
         method = SHAPES.get(kind)
         if method is None:
-            self.outside(node, f'shape "{_short(kind)}"', None, where)
+            self.outside(node, f'shape "{shown_value(kind)}"', None, where)
         else:
             shape = getattr(self, method)(node, p, where)
         if "flip_normals" in p and kind != "obj" and kind != "ply" and \
@@ -1168,7 +1168,7 @@ class _Importer:
         if emitters:
             e = emitters[0]
             if e.type != "area":
-                self.outside(e, f'emitter "{_short(e.type)}" on a shape', None, where)
+                self.outside(e, f'emitter "{shown_value(e.type)}" on a shape', None, where)
             if len(emitters) > 1:
                 raise XMLImportError(f"{emitters[1].where()}: a shape takes one area emitter "
                                      "(Mitsuba refuses a second)")

@@ -32,13 +32,13 @@ def add_parser(sub) -> None:
 def run(args) -> int:
     from whitted.reference.renderers.mitsuba.importer import check_output, write_import
     from whitted.tracer.errors import UserError
-    from whitted.tracer.mitsuba_xml import VALUE_SHOWN
+    from whitted.tracer.mitsuba_xml import shown_value
 
     out = check_output(args.output)  # its folder is made once the import has been checked
     params = {}
     for item in args.param or []:
         name, sep, value = item.partition("=")
-        shown_item = item if len(item) <= VALUE_SHOWN else item[:VALUE_SHOWN - 3] + "..."
+        shown_item = shown_value(item)
         if not sep or not name or not value.strip():
             raise UserError(f"-D {shown_item!r}: expected NAME=VALUE with a value")
         params[name] = value
