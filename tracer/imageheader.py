@@ -58,7 +58,7 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from whitted.tracer.errors import UserError
-from whitted.tracer.files import special_kind
+from whitted.tracer.files import NotRegularFile, read_regular, special_kind
 
 #: Formats by their first bytes (the magic numbers of their specifications).
 MAGIC = ((b"v/1\x01", "exr"), (b"\x89PNG\r\n\x1a\n", "png"), (b"PF", "pfm"), (b"Pf", "pfm"),
@@ -144,10 +144,17 @@ def regular_file_size(path: str | Path) -> int:
 
 def read_head(path: str | Path, n: int) -> bytes:
     """The first ``n`` bytes (or fewer) of a regular file."""
-    regular_file_size(path)  # opened only if it is (still) a regular file
+    return _read(path, n - 1)
+
+
+def _read(path: str | Path, limit: int) -> bytes:
+    """At most ``limit + 1`` bytes of the regular file ``path`` (:func:`tracer.files.
+    read_regular`: opened without blocking, checked again once open)."""
+    regular_file_size(path)
     try:
-        with open(path, "rb") as f:
-            return f.read(n)
+        return read_regular(path, limit)
+    except NotRegularFile as e:
+        raise ImageError(path, f"is {e.kind}, expected a regular file (an image)") from None
     except OSError as e:
         raise ImageError(path, f"cannot read: {e.strerror or e}") from None
 
@@ -155,12 +162,7 @@ def read_head(path: str | Path, n: int) -> bytes:
 def read_file(path: str | Path, header: ImageHeader) -> bytes:
     """The bytes of the file ``header`` was read from, no more than it measured: a file
     that has grown since (or is not the same file) is refused rather than read on."""
-    regular_file_size(path)
-    try:
-        with open(path, "rb") as f:
-            data = f.read(header.file_bytes + 1)
-    except OSError as e:
-        raise ImageError(path, f"cannot read: {e.strerror or e}") from None
+    data = _read(path, header.file_bytes)
     if len(data) > header.file_bytes:
         raise ImageError(path, f"the file grew beyond {header.file_bytes:,} bytes while it "
                                "was read")

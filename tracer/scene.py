@@ -322,7 +322,7 @@ MAX_NESTING = 16
 
 def _read_scene_bytes(path: str) -> bytes:
     """The file's bytes: a regular file no larger than the limit (no FIFO, no device)."""
-    from whitted.tracer.files import special_kind
+    from whitted.tracer.files import NotRegularFile, read_regular, special_kind
     from whitted.tracer.limits import MAX_SCENE_BYTES, refuse
 
     limit = MAX_SCENE_BYTES.value()
@@ -331,8 +331,11 @@ def _read_scene_bytes(path: str) -> bytes:
         raise IsADirectoryError
     if kind is not None:
         raise SceneError(path, "", f"is {kind}, expected a regular file (a .toml scene)")
-    with open(path, "rb") as f:
-        data = f.read(limit + 1)  # a file may grow, or report a wrong size
+    try:
+        data = read_regular(path, limit)  # a file may grow, or report a wrong size
+    except NotRegularFile as e:
+        raise SceneError(path, "", f"is {e.kind}, expected a regular file (a .toml scene)") \
+            from None
     if len(data) > limit:
         try:
             refuse(MAX_SCENE_BYTES, f"the scene file is larger than {limit:,} bytes",
