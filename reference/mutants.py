@@ -73,6 +73,11 @@ class Mutant:
     #: the deterministic reference reads the same code (tracer.sampling), so only the
     #: one-lobe reference can see the bug
     shared: bool = False
+    #: when the switch is decided: "render" (while the tracer traces its kernels, or
+    #: prepares the scene's tables), or "parse" (while the scene file is read: a
+    #: to_world composed, a sphere's radius scaled), for which the sweep reads the
+    #: scene again with the bug on
+    stage: str = "render"
 
     @property
     def references(self) -> tuple[str, ...]:
@@ -80,8 +85,9 @@ class Mutant:
         return ("onelobe",) if self.shared else ("deterministic", "onelobe")
 
 
-def _m(id_, summary, wrong, correct, lecture, slide, where, shared=False) -> Mutant:
-    return Mutant(id_, summary, wrong, correct, f'{lecture}, "{slide}"', where, shared)
+def _m(id_, summary, wrong, correct, lecture, slide, where, shared=False,
+       stage="render") -> Mutant:
+    return Mutant(id_, summary, wrong, correct, f'{lecture}, "{slide}"', where, shared, stage)
 
 
 #: The catalog: one entry per bug, in the order of the lectures' topics.
@@ -275,6 +281,31 @@ CATALOG: tuple[Mutant, ...] = (
        "inverse transpose.",
        "n' = M n", "n' = (M^-1)^T n",
        L2, "Instancing", "tracer/geometry.py: instance_normal_matrix"),
+    # --- transformed objects: to_world as the scene file gives it (lecture 2) ---------------
+    # Decided while the file is read; the Mitsuba side composes the same steps itself
+    # (reference/renderers/mitsuba/transforms.py), so each is a difference in the images.
+    _m("rotation-sign-flipped",
+       "A rotation turns the wrong way (the sine's sign flipped: the transpose of "
+       "Rodrigues' matrix).",
+       "R = cos I - sin [k]x + (1 - cos) k k^T", "R = cos I + sin [k]x + (1 - cos) k k^T",
+       L2, "Intersecting transformed objects", "tracer/transform.py: rotate",
+       stage="parse"),
+    _m("steps-composed-in-reverse",
+       "A list of to_world steps is applied last step first.",
+       "[A, B, C] -> M = A B C", "[A, B, C] -> M = C B A (the first step applied first)",
+       L2, "Intersecting transformed objects", "tracer/transform.py: compose",
+       stage="parse"),
+    _m("normals-by-matrix",
+       "A mesh's vertex normals are taken to world space by to_world itself, not by its "
+       "inverse transpose.",
+       "n' = M n", "n' = (M^-1)^T n",
+       L2, "Intersecting transformed objects", "tracer/shapes/mesh.py: parse",
+       stage="parse"),
+    _m("sphere-radius-unscaled",
+       "A sphere placed by a scaling to_world keeps the radius written in the file.",
+       "r' = r", "r' = s r (s: to_world's uniform scale)",
+       L2, "Intersecting transformed objects", "tracer/shapes/sphere.py: parse",
+       stage="parse"),
     _m("backface-not-flipped",
        "Two-sided shading forgets to turn the normal towards the side the ray comes "
        "from, so back faces go dark.",
@@ -286,6 +317,11 @@ CATALOG: tuple[Mutant, ...] = (
        "d = f + (2u - 1) tan(fov/2) aspect r + (1 - 2v) tan(fov/2) up",
        "d = f + (2u - 1) tan(fov/2) r + (1 - 2v) tan(fov/2) / aspect up",
        L1, "Perspective camera construction", "tracer/camera.py: generate_rays"),
+    _m("fov-y-divided",
+       "A vertical field of view (fov_axis = \"y\") is made horizontal by dividing by the "
+       "aspect ratio instead of multiplying.",
+       "tan(fov_x / 2) = tan(fov_y / 2) / aspect", "tan(fov_x / 2) = aspect tan(fov_y / 2)",
+       L1, "Perspective camera construction", "tracer/scene.py: Camera.fov_x"),
     _m("camera-y-not-flipped",
        "Image rows counted from the bottom: the picture is upside down.",
        "y_ndc = 2v - 1", "y_ndc = 1 - 2v (row 0 at the top)",
@@ -413,12 +449,13 @@ class Unit:
     clean_check: str = ""
     clean_passed: bool = True
 
-    def judge(self, tracer_image=None) -> dict:
-        """The verdict's checks for a tracer image (the tracer renders here for z-tests)."""
+    def judge(self, tracer_image=None, scene=None) -> dict:
+        """The verdict's checks for a tracer image (the tracer renders here for z-tests, of
+        ``scene``, by default the unit's own)."""
         from whitted.reference.verdicts.compare import image_metrics, judge, statistical_verdict
 
         if self.reference == "onelobe":
-            return statistical_verdict(self.scene, self.ref, tracer_image,
+            return statistical_verdict(scene or self.scene, self.ref, tracer_image,
                                        regions=self.regions, with_flip=False).verdict.checks
         metrics = image_metrics(tracer_image, self.ref, with_flip=False)
         return judge(self.test, metrics, tracer_image, self.ref)[0].checks
@@ -568,21 +605,24 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     results = {m.id: MutantResult(m.id, m.summary, m.topic, list(m.references))
                for m in mutants}
     scenes_out = []
-    scenes = [sweep_size(load_scene(p), quick) for p in scene_paths]  # validated first
-    for i, scene in enumerate(scenes, 1):
+    scenes = []
+    for p in scene_paths:   # validated first; the switches asked while each file is read
+        with faults.recording() as asked:
+            scenes.append((p, sweep_size(load_scene(p), quick), frozenset(asked)))
+    for i, (path, scene, read_asked) in enumerate(scenes, 1):
         t0 = time.perf_counter()
         if between is not None:
             between()
         units = scene_units(scene)
         clean = all(u.clean_passed for u in units)
-        reached = frozenset().union(*(u.reached for u in units))
+        reached = frozenset().union(*(u.reached for u in units), read_asked)
         todo = [m for m in mutants if m.id in reached]
         for m in todo:
             r = results[m.id]
             if between is not None:
                 between()
             t1 = time.perf_counter()
-            outcome = _judge_mutant(m, units)
+            outcome = _judge_mutant(m, units, lambda p=path: sweep_size(load_scene(p), quick))
             r.seconds += time.perf_counter() - t1
             if isinstance(outcome, Catch):
                 outcome.scene = scene.name
@@ -608,23 +648,40 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
                        time.perf_counter() - start)
 
 
-def _judge_mutant(m: Mutant, units: list[Unit]):
-    """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not."""
+def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
+    """A Catch from the first of the scene's verdicts that fails with ``m`` on, else why not.
+
+    A bug decided while the file is read (``stage == "parse"``) is judged on the scene
+    read again with it on (``reread()``): its camera, lights and shapes replace those of
+    each verdict's scene, whose film and materials stay the verdict's own."""
+    from dataclasses import replace
+
     from whitted.reference.verdicts.compare import (
         shared_tracer_image,  # a new render with the bug on
     )
 
+    fresh = None
+    if m.stage == "parse" and reread is not None:
+        try:
+            with faults.active(m.id):
+                fresh = reread()
+        except Exception as e:  # the bug made the file unreadable: not the harness's catch
+            return f"error: {type(e).__name__}: {e}"
     seen_by_any = False
     for u in units:
-        if m.id not in u.reached:
+        scene = u.scene
+        if fresh is not None:
+            scene = replace(u.scene, camera=fresh.camera, lights=fresh.lights,
+                            shapes=fresh.shapes, groups=fresh.groups)
+        elif m.id not in u.reached:
             continue          # this verdict's render never asks for the switch
         if m.shared and u.reference == "deterministic":
             continue          # the reference reads the same code: blind by construction
         seen_by_any = True
         try:
             with faults.active(m.id):
-                image = None if u.reference == "onelobe" else shared_tracer_image(u.scene)
-                checks = u.judge(image)
+                image = None if u.reference == "onelobe" else shared_tracer_image(scene)
+                checks = u.judge(image, scene)
         except Exception as e:  # a bug that crashes the tracer is not a catch of the harness
             return f"error: {type(e).__name__}: {e}"
         if not all(c["pass"] for c in checks.values()):

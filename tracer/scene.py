@@ -37,8 +37,8 @@ from whitted.scenes import resolve as resolve_scene
 # The kinds that used to be defined here are re-exported ("X as X"), so that
 # ``from tracer.scene import Diffuse`` keeps working.
 from whitted.tracer import emitters as _emitters
+from whitted.tracer import faults, settings_schema
 from whitted.tracer import materials as _materials
-from whitted.tracer import settings_schema
 from whitted.tracer import shapes as _shapes
 from whitted.tracer import transform as tf
 from whitted.tracer.emitters import area as _area
@@ -64,7 +64,7 @@ from whitted.tracer.settings import (
     as_tuple,
     check_distinct,
     norm,
-    parse_steps,
+    read_steps,
     show,
 )
 from whitted.tracer.shapes.base import Context as _ShapeContext
@@ -143,6 +143,9 @@ class Camera:
     #: the camera-to-world matrix when ``to_world`` was given instead of origin/target/up
     #: (origin, target and up are then read from it)
     matrix: Matrix | None = None
+    #: that ``to_world``'s steps as the file gives them (:data:`tracer.settings.Step`),
+    #: from which the Mitsuba side builds its own (None: origin/target/up, or made in code)
+    steps: tuple | None = field(default=None, compare=False, repr=False)
 
     def to_world(self) -> np.ndarray:
         if self.matrix is not None:
@@ -165,7 +168,7 @@ class Camera:
             axis = "x" if aspect > 1 else "y"
         t = math.tan(math.radians(self.fov) / 2)
         if axis == "y":
-            t *= aspect
+            t = t / aspect if faults.on("fov-y-divided") else t * aspect
         elif axis == "diagonal":
             t /= math.sqrt(1 + 1 / (aspect * aspect))
         return math.degrees(2 * math.atan(t))
@@ -493,12 +496,12 @@ def _parse_film(t: Table) -> Film:
 
 def _parse_camera(t: Table) -> Camera:
     kind = t.string("type", "perspective", CAMERA_TYPES)
-    matrix = None
+    matrix = steps = None
     if t.has("to_world"):
         given = [k for k in ("origin", "target", "up") if t.has(k)]
         if given:
             t.fail(given[0], "give either to_world or origin/target/up, not both")
-        m = parse_steps(t, "to_world")
+        m, steps = read_steps(t, "to_world")
         if kind == "perspective" and not _orthonormal(m[:3, :3]):
             t.fail("to_world", "a perspective camera's to_world may rotate, mirror and "
                                "translate, not scale or shear (its rays would not be unit)")
@@ -527,7 +530,8 @@ def _parse_camera(t: Table) -> Camera:
         ppo = (t.number("principal_point_offset_x", 0.0, lo=-1, hi=1),
                t.number("principal_point_offset_y", 0.0, lo=-1, hi=1))
         cam = Camera("perspective", origin, target, up, fov=fov, near_clip=near, far_clip=far,
-                     pixel_offset=offset, fov_axis=axis, principal_point=ppo, matrix=matrix)
+                     pixel_offset=offset, fov_axis=axis, principal_point=ppo, matrix=matrix,
+                     steps=steps)
         note = " (width is for orthographic cameras)" if t.has("width") else ""
     else:
         if matrix is not None:  # the view is [-1, 1]^2 in camera space, scaled by to_world
@@ -537,7 +541,7 @@ def _parse_camera(t: Table) -> Camera:
         else:
             width = t.number("width", lo=0, lo_open=True)
         cam = Camera("orthographic", origin, target, up, width=width, near_clip=near,
-                     far_clip=far, pixel_offset=offset, matrix=matrix)
+                     far_clip=far, pixel_offset=offset, matrix=matrix, steps=steps)
         note = (" (fov, fov_axis and principal_point_offset_x/y are for perspective cameras)"
                 if any(t.has(k) for k in ("fov", "fov_axis", "principal_point_offset_x",
                                           "principal_point_offset_y")) else "")

@@ -367,23 +367,39 @@ def check_transform(t: Table, key: str, m: np.ndarray, what: str = "transform") 
 STEPS = ("translate", "scale", "rotate", "matrix")
 
 
+#: A ``to_world`` step as the file gives it, before anything is composed: the reader's
+#: output, which the tracer composes with :mod:`tracer.transform` and the Mitsuba side with
+#: Mitsuba's own transforms (:mod:`reference.renderers.mitsuba.transforms`).
+#: ``("translate", (x, y, z))``, ``("scale", (sx, sy, sz))``, ``("rotate", (ax, ay, az),
+#: degrees)`` with a unit axis (docs/scene-format.md: "the axis is normalised"), or
+#: ``("matrix", 4 rows of 4)``; a list of them applies the first step first.
+Step = tuple
+
+
 def parse_steps(t: Table, key: str) -> np.ndarray:
+    """The composed matrix of a ``to_world`` (see :func:`read_steps`)."""
+    return read_steps(t, key)[0]
+
+
+def read_steps(t: Table, key: str) -> tuple[np.ndarray, tuple[Step, ...]]:
+    """A ``to_world`` value: its steps as read (:data:`Step`) and the tracer's composition
+    of them (:func:`tracer.transform.compose`), checked."""
     if t.is_table(key):  # one step given as a table: { matrix = [...] }
-        mats = [parse_step(t.table(key))]
+        steps = [parse_step(t.table(key))]
     else:
-        mats = t.tables(key, parse_step,
-                        "a list of steps like [{ translate = [x, y, z] }]",
-                        "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
-                        "{ matrix = [[..] x4] }")
-    m = tf.compose(mats)
+        steps = t.tables(key, parse_step,
+                         "a list of steps like [{ translate = [x, y, z] }]",
+                         "a step: { translate = [..] }, { scale = .. }, { rotate = {..} } or "
+                         "{ matrix = [[..] x4] }")
+    m = tf.compose([tf.step_matrix(s) for s in steps])
     check_transform(t, key, m)
-    return m
+    return m, tuple(steps)
 
 
-def parse_step(s: Table) -> np.ndarray:
+def parse_step(s: Table) -> Step:
     op = s.choose(STEPS, "step")
     if op == "translate":
-        m = tf.translate(s.vec3("translate"))
+        step = ("translate", tuple(s.vec3("translate")))
     elif op == "scale":
         v = s.raw("scale", ..., "a number or a list of 3 numbers",
                   {"anyOf": [{"type": "number"}, VEC3_SCHEMA]})
@@ -393,11 +409,11 @@ def parse_step(s: Table) -> np.ndarray:
         if any(abs(x) < FLOAT32_TINY for x in sv):
             s.fail("scale", f"expected non-zero scale factors, got {show(v)} "
                             "(a factor is zero in float32)")
-        m = tf.scale(sv)
+        step = ("scale", tuple(float(x) for x in sv))
     elif op == "rotate":
         r = s.table("rotate")
         axis = r.direction("axis")
-        m = tf.rotate(axis, r.number("angle"))
+        step = ("rotate", tuple(float(x) for x in axis), float(r.number("angle")))
         r.finish()
     else:
         row = {"type": "array", "items": {"type": "number"}, "minItems": 4, "maxItems": 4}
@@ -417,8 +433,9 @@ def parse_step(s: Table) -> np.ndarray:
         m = np.asarray(v, dtype=np.float64)
         if not np.allclose(m[3], [0, 0, 0, 1]):
             s.fail("matrix", "expected an affine matrix (last row [0, 0, 0, 1])")
+        step = ("matrix", as_tuple(m))
     s.finish()
-    return m
+    return step
 
 
 def as_tuple(m: np.ndarray) -> Matrix:
@@ -427,6 +444,14 @@ def as_tuple(m: np.ndarray) -> Matrix:
 
 
 def read_points(t: Table, key: str, m: np.ndarray, exactly: int | None = None) -> list:
+    """The points of ``key`` moved by ``m`` (world space)."""
+    return read_local_points(t, key, m, exactly)[1]
+
+
+def read_local_points(t: Table, key: str, m: np.ndarray,
+                      exactly: int | None = None) -> tuple[tuple, list]:
+    """The points of ``key`` as the file gives them (a tuple of 3-tuples) and moved by
+    ``m`` (a list of arrays, world space), checked."""
     what = (f"a list of {exactly} vertices [[x, y, z], ...]" if exactly
             else "a list of at least 3 vertices [[x, y, z], ...]")
     counts = {"minItems": exactly, "maxItems": exactly} if exactly else {"minItems": 3}
@@ -434,12 +459,15 @@ def read_points(t: Table, key: str, m: np.ndarray, exactly: int | None = None) -
     if not isinstance(v, list) or (len(v) != exactly if exactly else len(v) < 3):
         got = f"a list of {len(v)}" if isinstance(v, list) else show(v)
         t.fail(key, f"expected {what}, got {got}")
-    pts = [tf.apply_point(m, check_vec3(t, f"{key}[{i}]", p)) for i, p in enumerate(v)]
+    local = tuple(tuple(float(x) for x in check_vec3(t, f"{key}[{i}]", p))
+                  for i, p in enumerate(v))
+    pts = [tf.apply_point(m, p) for p in local]
     check_extent(t, key, np.asarray(pts), "vertices")
-    return pts
+    return local, pts
 
 
 __all__ = ["COND_MAX", "COORD_MAX", "FLOAT32_MAX", "FLOAT32_TINY", "STEPS", "VEC3_SCHEMA",
            "Color", "Matrix", "Table", "Vec3", "as_tuple", "check_distinct", "check_extent",
            "check_number", "check_transform", "check_unit", "check_vec3", "norm", "norm_or_1",
-           "number_schema", "parse_step", "parse_steps", "range_text", "read_points", "show"]
+           "number_schema", "parse_step", "parse_steps", "range_text", "read_local_points",
+           "read_points", "read_steps", "show", "Step"]

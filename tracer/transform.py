@@ -12,6 +12,8 @@ import math
 
 import numpy as np
 
+from whitted.tracer import faults
+
 
 def translate(v) -> np.ndarray:
     m = np.eye(4)
@@ -29,6 +31,8 @@ def rotate(axis, angle_deg: float) -> np.ndarray:
     k = np.asarray(axis, dtype=np.float64)
     k = k / np.linalg.norm(k)
     a = math.radians(angle_deg)
+    if faults.on("rotation-sign-flipped"):
+        a = -a
     c, s = math.cos(a), math.sin(a)
     kx = np.array([[0, -k[2], k[1]], [k[2], 0, -k[0]], [-k[1], k[0], 0]])
     m = np.eye(4)
@@ -53,11 +57,27 @@ def look_at(origin, target, up) -> np.ndarray:
     return m
 
 
+def step_matrix(step: tuple) -> np.ndarray:
+    """The matrix of one ``to_world`` step as the reader gives it
+    (:data:`tracer.settings.Step`)."""
+    op = step[0]
+    if op == "translate":
+        return translate(step[1])
+    if op == "scale":
+        return scale(step[1])
+    if op == "rotate":
+        return rotate(step[1], step[2])
+    assert op == "matrix", op   # the reader gives no other step (tracer.settings.STEPS)
+    return np.asarray(step[1], dtype=np.float64)
+
+
 def compose(steps: list[np.ndarray]) -> np.ndarray:
     """Matrix of steps applied in the order given (first step first)."""
+    # (the switch is asked only where the order can matter: two steps or more)
+    reverse = len(steps) > 1 and faults.on("steps-composed-in-reverse")
     m = np.eye(4)
     for s in steps:
-        m = s @ m
+        m = m @ s if reverse else s @ m
     return m
 
 

@@ -12,13 +12,16 @@ from __future__ import annotations
 
 import math
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.tracer.emitters.envmap import EnvMap
 
 
 def mitsuba(light: EnvMap) -> dict:
     return {"type": "envmap", "filename": ("string", light.filename),
-            "scale": ("float", light.scale), "to_world": matrix(light.to_world)}
+            "scale": ("float", light.scale),
+            # the file's own steps, composed by Mitsuba (made in code: the matrix)
+            "to_world": transforms.tree(transforms.matrix_step(light.to_world)
+                                        if light.steps is None else light.steps)}
 
 
 def sample_map(u, mi):

@@ -18,15 +18,21 @@ difference (README, "LuxCore"). A textured spot is refused.
 
 from __future__ import annotations
 
+import numpy as np
+
 from whitted.reference.materials.textures import texture_tree
-from whitted.reference.renderers.mitsuba.tree import matrix, rgb
+from whitted.reference.renderers.mitsuba import transforms
+from whitted.reference.renderers.mitsuba.tree import any_up, rgb
 from whitted.tracer.emitters.spot import SpotLight
 from whitted.tracer.errors import UserError
 
 
 def mitsuba(light: SpotLight) -> dict:
     tree = {"type": "spot",
-            "to_world": matrix(light.frame()),
+            # Mitsuba's look_at from the position to the target, as the file gives them
+            "to_world": transforms.tree(transforms.lookat_step(
+                light.position, light.target,
+                any_up(np.subtract(light.target, light.position)))),
             "intensity": rgb(light.intensity),
             "cutoff_angle": ("float", light.cutoff_angle),
             "beam_width": ("float", light.beam_width)}

@@ -6,7 +6,10 @@
   (:mod:`reference.renderers.mitsuba.tree`), or an in-memory mesh node
   (:func:`reference.shapes.meshes.mesh_node`, written as an ``obj`` file beside
   the XML, named ``name``); :mod:`reference.renderers.mitsuba.scene` adds its BSDF
-  and emitter;
+  and emitter. Its placement is built by Mitsuba from the values the file gives
+  (the model's :class:`tracer.shapes.base.Placement`: ``to_world``'s steps, a
+  sphere's centre and radius, a triangle's or a polygon's own vertices), never taken
+  from the tracer's composed matrices (:mod:`reference.renderers.mitsuba.transforms`);
 * ``luxcore(shape) -> (vertices, faces, normals or None)``: the shape as a
   world-space triangle mesh for LuxCore (:mod:`reference.renderers.luxcore.scene`),
   only where it means the same; a kind without one is refused in one line,

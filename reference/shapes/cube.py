@@ -3,13 +3,13 @@ LuxCore (a mesh's conversion)."""
 
 from __future__ import annotations
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes import mesh
 from whitted.tracer.shapes.cube import Cube
 
 
 def mitsuba(shape: Cube, name: str) -> dict:
-    return {"type": "cube", "to_world": matrix(shape.to_world)}
+    return {"type": "cube", "to_world": transforms.tree(transforms.of(shape))}
 
 
 luxcore = mesh.luxcore

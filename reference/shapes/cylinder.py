@@ -6,15 +6,17 @@ import math
 
 import numpy as np
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import grid_faces, normals_outward, segments
 from whitted.tracer import transform as tf
 from whitted.tracer.shapes.cylinder import Cylinder
 
 
 def mitsuba(shape: Cylinder, name: str) -> dict:
+    # p0, p1 and radius as read; Mitsuba composes to_world x its frame from p0 to p1
     return {"type": "cylinder", "p0": ("point", shape.p0), "p1": ("point", shape.p1),
-            "radius": ("float", shape.radius), "to_world": matrix(shape.to_world)}
+            "radius": ("float", shape.radius),
+            "to_world": transforms.tree(transforms.of(shape))}
 
 
 def cylinder_mesh(c: Cylinder):

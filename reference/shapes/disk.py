@@ -6,14 +6,14 @@ import math
 
 import numpy as np
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import orient, segments
 from whitted.tracer import transform as tf
 from whitted.tracer.shapes.disk import Disk
 
 
 def mitsuba(shape: Disk, name: str) -> dict:
-    return {"type": "disk", "to_world": matrix(shape.to_world)}
+    return {"type": "disk", "to_world": transforms.tree(transforms.of(shape))}
 
 
 def disk_mesh(d: Disk):

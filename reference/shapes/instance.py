@@ -6,10 +6,10 @@ its group's meshes, transformed (:func:`reference.renderers.luxcore.scene.descri
 
 from __future__ import annotations
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.tracer.shapes.instance import Instance
 
 
 def mitsuba(shape: Instance, name: str) -> dict:
-    return {"type": "instance", "to_world": matrix(shape.to_world),
+    return {"type": "instance", "to_world": transforms.tree(transforms.of(shape)),
             "shapegroup": {"type": "ref", "id": ("string", f"group_{shape.group}")}}

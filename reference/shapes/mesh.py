@@ -5,14 +5,17 @@ from __future__ import annotations
 
 import numpy as np
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.tracer.shapes.mesh import Mesh
 
 
 def mitsuba(shape: Mesh, name: str) -> dict:
+    # Mitsuba reads the file itself and moves its points (normals by the inverse
+    # transpose) by the to_world it composes from the file's steps.
     kind = "ply" if shape.file.lower().endswith(".ply") else "obj"
     return {"type": kind, "filename": ("string", shape.file),
-            "face_normals": ("boolean", not shape.smooth), "to_world": matrix(shape.to_world)}
+            "face_normals": ("boolean", not shape.smooth),
+            "to_world": transforms.tree(transforms.of(shape))}
 
 
 def luxcore(shape: Mesh):

@@ -17,12 +17,16 @@ import numpy as np
 TESSELLATION = 1e-4
 
 
-def mesh_node(name, vertices, faces, normals=None, uvs=None) -> dict:
-    """An in-memory Mitsuba mesh (an ``obj`` file beside the XML)."""
+def mesh_node(name, vertices, faces, normals=None, uvs=None, to_world=()) -> dict:
+    """An in-memory Mitsuba mesh (an ``obj`` file beside the XML): ``vertices`` and
+    ``normals`` in the shape's own space, moved by Mitsuba's composition of the steps
+    ``to_world`` (:mod:`reference.renderers.mitsuba.transforms`; none: already in world
+    space)."""
     return {"type": "mesh", "name": name, "vertices": np.asarray(vertices, dtype=np.float64),
             "faces": np.asarray(faces, dtype=np.int64).reshape(-1, 3),
             "normals": None if normals is None else np.asarray(normals, dtype=np.float64),
-            "uvs": None if uvs is None else np.asarray(uvs, dtype=np.float64)}
+            "uvs": None if uvs is None else np.asarray(uvs, dtype=np.float64),
+            "to_world": tuple(to_world)}
 
 
 def segments(radius: float, size: float, e: float = TESSELLATION) -> int:
@@ -56,3 +60,4 @@ def normals_outward(verts, faces, normals):
     """Wind each face so that its geometric normal agrees with its vertices' normals."""
     avg = normals[faces].sum(1)
     return orient(verts, faces, avg)
+

@@ -10,6 +10,7 @@ import math
 
 import numpy as np
 
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import mesh_node
 from whitted.tracer import transform as tf
 from whitted.tracer.shapes.paraboloid import Paraboloid
@@ -18,7 +19,7 @@ from whitted.tracer.shapes.paraboloid import Paraboloid
 PARABOLOID_DEVIATION = 1e-4
 
 
-def paraboloid_mesh(par: Paraboloid):
+def paraboloid_mesh(par: Paraboloid, world: bool = True):
     """(vertices, faces, normals, uvs, rings, segments) of a paraboloid, tessellated.
 
     The surface is x = a s cos(phi), y = b s sin(phi), z = s^2 for
@@ -28,6 +29,7 @@ def paraboloid_mesh(par: Paraboloid):
     dphi = sqrt(8 e / R) and ds = sqrt(4 e) keep both within e =
     PARABOLOID_DEVIATION x the shape's size. Vertex normals are the exact
     gradients, interpolated across each triangle like the tracer's smooth meshes.
+    ``world`` False: vertices and normals in the shape's own space (before to_world).
     """
     m = np.asarray(par.to_world, dtype=np.float64)
     s_max = math.sqrt(par.height)
@@ -43,6 +45,8 @@ def paraboloid_mesh(par: Paraboloid):
     grad = np.stack([2 * local[..., 0] / par.a ** 2, 2 * local[..., 1] / par.b ** 2,
                      -np.ones_like(S)], axis=-1)
     uvs = np.stack([S / s_max, P / (2 * math.pi)], axis=-1)
+    if not world:
+        m = np.eye(4)
     verts = tf.apply_point(m, local.reshape(-1, 3))
     normals = tf.apply_normal(m, grad.reshape(-1, 3))
     normals /= np.linalg.norm(normals, axis=1, keepdims=True)
@@ -59,8 +63,12 @@ def paraboloid_mesh(par: Paraboloid):
 
 
 def mitsuba(shape: Paraboloid, name: str) -> dict:
-    verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape)
-    return mesh_node(name, verts, faces, normals, uvs)
+    # tessellated in its own space, moved by Mitsuba's composition of to_world
+    if shape.placement is None:
+        verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape)
+        return mesh_node(name, verts, faces, normals, uvs)
+    verts, faces, normals, uvs, _, _ = paraboloid_mesh(shape, world=False)
+    return mesh_node(name, verts, faces, normals, uvs, to_world=transforms.of(shape))
 
 
 def luxcore(shape: Paraboloid):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import mesh_node
 from whitted.tracer.shapes.polygon import Polygon, ear_clip, plane_frame
 
@@ -17,8 +18,14 @@ def polygon_mesh(poly: Polygon):
 
 
 def mitsuba(shape: Polygon, name: str) -> dict:
+    # The vertices as the file gives them, moved by Mitsuba's composition of to_world;
+    # the triangles (ear clipping) and uvs (the plane's coordinates) are the tracer's
+    # (docs/verdicts.md, "What both sides share"): an affine map keeps a triangulation one.
     verts, faces, uvs = polygon_mesh(shape)
-    return mesh_node(name, verts, faces, None, uvs)
+    p = shape.placement
+    if p is None:
+        return mesh_node(name, verts, faces, None, uvs)
+    return mesh_node(name, p.points, faces, None, uvs, to_world=transforms.of(shape))
 
 
 def luxcore(shape: Polygon):

@@ -4,14 +4,14 @@ from __future__ import annotations
 
 import numpy as np
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import orient
 from whitted.tracer import transform as tf
 from whitted.tracer.shapes.rectangle import Rectangle
 
 
 def mitsuba(shape: Rectangle, name: str) -> dict:
-    return {"type": "rectangle", "to_world": matrix(shape.to_world)}
+    return {"type": "rectangle", "to_world": transforms.tree(transforms.of(shape))}
 
 
 def rectangle_mesh(r: Rectangle):

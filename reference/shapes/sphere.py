@@ -6,20 +6,23 @@ import math
 
 import numpy as np
 
-from whitted.reference.renderers.mitsuba.tree import matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes.meshes import TESSELLATION, grid_faces, normals_outward, segments
 from whitted.tracer import transform as tf
 from whitted.tracer.shapes.sphere import Sphere
 
 
 def mitsuba(shape: Sphere, name: str) -> dict:
-    # Mitsuba composes to_world x translate(center) x scale(radius): give it the rotation.
-    rot = np.eye(4)
-    rot[:3, :3] = np.asarray(shape.rotation)
-    t = {"type": "sphere", "center": ("point", shape.center),
-         "radius": ("float", shape.radius)}
-    if not np.allclose(rot, np.eye(4)):
-        t = {"type": "sphere", "to_world": matrix(shape.to_world())}
+    # The centre, radius and to_world steps as the file gives them: Mitsuba composes
+    # to_world x translate(center) x scale(radius) itself (src/shapes/sphere.cpp). A sphere
+    # made in code has only the tracer's world-space centre, radius and rotation.
+    p = shape.placement
+    if p is None:
+        return {"type": "sphere", "to_world": transforms.tree(transforms.matrix_step(
+            shape.to_world()))}
+    t = {"type": "sphere", "center": ("point", p.center), "radius": ("float", p.radius)}
+    if p.steps:
+        t["to_world"] = transforms.tree(p.steps)
     return t
 
 

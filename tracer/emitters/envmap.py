@@ -27,7 +27,7 @@ import numpy as np
 
 from whitted.tracer.backend import deferred, jit, upload_rows
 from whitted.tracer.emitters import base
-from whitted.tracer.settings import Table, as_tuple, parse_steps
+from whitted.tracer.settings import Table, as_tuple, read_steps
 
 dr = deferred("drjit")
 lights = deferred("whitted.tracer.lights")
@@ -43,6 +43,9 @@ class EnvMap(base.LightModel):
     scale: float = 1.0
     to_world: Matrix = ((1.0, 0.0, 0.0, 0.0), (0.0, 1.0, 0.0, 0.0), (0.0, 0.0, 1.0, 0.0),
                         (0.0, 0.0, 0.0, 1.0))
+    #: ``to_world``'s steps as the file gives them (:data:`tracer.settings.Step`), from
+    #: which the Mitsuba side builds its own; None: made in code
+    steps: tuple | None = None
 
 
 MODEL = EnvMap
@@ -54,7 +57,7 @@ def parse(t: Table) -> EnvMap:
     # Every key is read before the file is (the schema records the keys a parser reads).
     path = (Path(t.path).parent / t.string("filename")).resolve()
     scale = t.number("scale", 1.0, lo=0)
-    m = parse_steps(t, "to_world") if t.has("to_world") else np.eye(4)
+    m, steps = read_steps(t, "to_world") if t.has("to_world") else (np.eye(4), ())
     r = np.asarray(m)[:3, :3]
     if not np.allclose(r @ r.T, np.eye(3), atol=1e-5):
         t.fail("to_world", "an environment map's to_world must be a rotation")
@@ -63,7 +66,7 @@ def parse(t: Table) -> EnvMap:
         t.fail("filename", f"{path.name}: an environment map needs at least 2 rows")
     if not np.isfinite(texels).all() or texels.min() < 0:
         t.fail("filename", f"{path.name}: texel values must be finite and >= 0")
-    return EnvMap(str(path), texels, scale, as_tuple(m))
+    return EnvMap(str(path), texels, scale, as_tuple(m), steps)
 
 
 class Emitter(base.Emitter):

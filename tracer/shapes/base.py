@@ -37,7 +37,7 @@ import numpy as np
 
 from whitted.tracer import backend
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
-from whitted.tracer.settings import Table, parse_steps
+from whitted.tracer.settings import Table, read_steps
 
 dr = deferred("drjit")
 
@@ -65,6 +65,28 @@ class ShapeModel:
         return 1
 
 
+@dataclass(frozen=True)
+class Placement:
+    """Where a shape is, as its table in the file gives it, before the tracer composes
+    anything: ``to_world``'s steps (:data:`tracer.settings.Step`; none: the identity) and
+    the kind's own values in its own space (a triangle's or a polygon's ``points``, a
+    sphere's ``center`` and ``radius``). The Mitsuba side builds its shape from these
+    with Mitsuba's own transforms (reference/shapes/), so the tracer's composition of
+    them (tracer/transform.py) is checked by the comparison instead of shared by it.
+    A shape made in code has none (``placement`` None), and the conversion takes its
+    composed matrix."""
+    steps: tuple = ()
+    points: tuple | None = None
+    center: tuple | None = None
+    radius: float | None = None
+
+
+def placement_field():
+    """The ``placement`` field every kind's model ends with (:class:`Placement`): not part
+    of the shape's identity (two readings of one placement are the same shape)."""
+    return field(default=None, compare=False, repr=False)
+
+
 @dataclass
 class Context:
     """What the scene parser read of a ``[[shapes]]`` table before the kind's own keys."""
@@ -76,13 +98,19 @@ class Context:
     base: Path
     in_group: bool = False
     _matrix: Any = field(default=None, repr=False)
+    _steps: tuple = field(default=(), repr=False)
 
     def to_world(self) -> np.ndarray:
-        """The table's ``to_world`` (steps, :func:`tracer.settings.parse_steps`), read on
+        """The table's ``to_world`` (steps, :func:`tracer.settings.read_steps`), read on
         the first call: a kind reads it where its keys begin."""
         if self._matrix is None:
-            self._matrix = parse_steps(self.t, "to_world")
+            self._matrix, self._steps = read_steps(self.t, "to_world")
         return self._matrix
+
+    def placement(self, **values) -> Placement:
+        """The shape's :class:`Placement`: the steps of its ``to_world`` and ``values``."""
+        self.to_world()
+        return Placement(self._steps, **values)
 
 
 # --------------------------------------------------------------------------- packing

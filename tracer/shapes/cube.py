@@ -52,7 +52,7 @@ def parse(t: Table, ctx: base.Context) -> Cube:
     world = tf.apply_point(m, verts)
     check_extent(t, "to_world", world, "vertices")
     return Cube("cube", False, world, faces, None, uvs, as_tuple(m), ctx.material,
-                ctx.emitter)
+                ctx.emitter, ctx.placement())
 
 
 bounds = mesh.bounds

@@ -80,6 +80,7 @@ class Cylinder(base.ShapeModel):
     to_world: Matrix
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    placement: base.Placement | None = base.placement_field()
 
     def local_to_world(self) -> np.ndarray:
         """Unit cylinder x^2 + y^2 = 1, 0 <= z <= 1 to world, composed as Mitsuba does."""
@@ -100,7 +101,7 @@ def parse(t: Table, ctx: base.Context) -> Cylinder:
     p0, p1 = t.vec3("p0", [0.0, 0.0, 0.0]), t.vec3("p1", [0.0, 0.0, 1.0])
     t.distinct("p1", p0, p1, "p0")
     shape = Cylinder(p0, p1, t.number("radius", 1.0, lo=0, lo_open=True), as_tuple(m),
-                     ctx.material, ctx.emitter)
+                     ctx.material, ctx.emitter, ctx.placement())
     check_transform(t, "radius", shape.local_to_world(), "placement (radius against length)")
     lin = shape.local_to_world()[:3, :3]
     x, y, z = lin[:, 0], lin[:, 1], lin[:, 2]

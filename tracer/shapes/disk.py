@@ -53,7 +53,7 @@ MODEL = Disk
 
 
 def parse(t: Table, ctx) -> Disk:
-    return Disk(as_tuple(ctx.to_world()), ctx.material, ctx.emitter)
+    return Disk(as_tuple(ctx.to_world()), ctx.material, ctx.emitter, ctx.placement())
 
 
 bounds = rectangle.bounds

@@ -27,6 +27,7 @@ class Instance(base.ShapeModel):
     to_world: Matrix
     material: str | None = None
     emitter: Any = None
+    placement: base.Placement | None = base.placement_field()
 
 
 MODEL = Instance
@@ -37,7 +38,7 @@ def parse(t: Table, ctx: base.Context) -> Instance:
     if group not in ctx.groups:
         known = ", ".join(sorted(ctx.groups)) or "none"
         t.fail("group", f'unknown group "{group}" (defined: {known})')
-    return Instance(group, as_tuple(ctx.to_world()))
+    return Instance(group, as_tuple(ctx.to_world()), placement=ctx.placement())
 
 
 def pack(members: list, packing) -> list:

@@ -39,6 +39,7 @@ class Mesh(base.ShapeModel):
     to_world: Matrix
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    placement: base.Placement | None = base.placement_field()
 
     def primitive_count(self) -> int:
         return len(self.faces)
@@ -65,12 +66,13 @@ def parse(t: Table, ctx: base.Context) -> Mesh:
     normals = None
     if smooth:
         if data.normals is not None:  # normals transform by the inverse transpose
-            normals = tf.apply_normal(m, data.normals)
+            normals = (data.normals @ m[:3, :3].T if faults.on("normals-by-matrix")
+                       else tf.apply_normal(m, data.normals))
         else:  # as Mitsuba does: from the faces, after to_world
             normals = compute_vertex_normals(verts, data.faces)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
-                as_tuple(m), ctx.material, ctx.emitter)
+                as_tuple(m), ctx.material, ctx.emitter, ctx.placement())
 
 
 def bounds(shape) -> tuple[np.ndarray, np.ndarray]:

@@ -77,6 +77,7 @@ class Paraboloid(base.ShapeModel):
     to_world: Matrix
     material: str | None
     emitter: Any = None   # always None: no sampler, so no area emitter
+    placement: base.Placement | None = base.placement_field()
 
 
 MODEL = Paraboloid
@@ -87,7 +88,7 @@ def parse(t: Table, ctx: base.Context) -> Paraboloid:
     shape = Paraboloid(t.number("a", 1.0, lo=0, lo_open=True),
                        t.number("b", 1.0, lo=0, lo_open=True),
                        t.number("height", 1.0, lo=0, lo_open=True), as_tuple(m),
-                       ctx.material, ctx.emitter)
+                       ctx.material, ctx.emitter, ctx.placement())
     h = math.sqrt(shape.height)
     check_transform(t, "height", m @ tf.scale((shape.a * h, shape.b * h, shape.height)),
                     "shape (a, b and height against each other)")

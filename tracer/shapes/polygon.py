@@ -18,7 +18,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from whitted.tracer.backend import deferred, jit
-from whitted.tracer.settings import Table, Vec3, read_points
+from whitted.tracer.settings import Table, Vec3, read_local_points
 from whitted.tracer.shapes import base, mesh
 
 dr = deferred("drjit")
@@ -141,16 +141,17 @@ class Polygon(base.ShapeModel):
     vertices: tuple[Vec3, ...]
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    placement: base.Placement | None = base.placement_field()
 
 
 MODEL = Polygon
 
 
 def parse(t: Table, ctx: base.Context) -> Polygon:
-    verts = read_points(t, "vertices", ctx.to_world())
+    local, verts = read_local_points(t, "vertices", ctx.to_world())
     _check_polygon(t, verts)
     return Polygon(tuple(tuple(float(x) for x in p) for p in verts), ctx.material,
-                   ctx.emitter)
+                   ctx.emitter, ctx.placement(points=local))
 
 
 def _check_polygon(t: Table, verts: list) -> None:

@@ -64,6 +64,7 @@ class Planar(base.ShapeModel):
     to_world: Matrix
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    placement: base.Placement | None = base.placement_field()
 
     def corners(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Centre and the images of local +x and +y (half-edges, or radii) in world space."""
@@ -87,7 +88,7 @@ MODEL = Rectangle
 
 
 def parse(t: Table, ctx: base.Context) -> Rectangle:
-    return Rectangle(as_tuple(ctx.to_world()), ctx.material, ctx.emitter)
+    return Rectangle(as_tuple(ctx.to_world()), ctx.material, ctx.emitter, ctx.placement())
 
 
 def bounds(shape: Planar) -> tuple[np.ndarray, np.ndarray]:

@@ -132,6 +132,7 @@ class Sphere(base.ShapeModel):
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
     #: rotation of the sphere's own frame (its texture coordinates), row-major 3x3
     rotation: Matrix = ((1.0, 0.0, 0.0), (0.0, 1.0, 0.0), (0.0, 0.0, 1.0))
+    placement: base.Placement | None = base.placement_field()
 
     def to_world(self) -> np.ndarray:
         """The whole placement as Mitsuba builds it: rotation, uniform scale, translation."""
@@ -152,8 +153,12 @@ def parse(t: Table, ctx: base.Context) -> Sphere:
         t.fail("to_world", "a sphere takes only translations, rotations and uniform "
                            "positive scales (the result must stay a sphere)")
     scale = float(np.linalg.norm(m[:3, 0]))
-    shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), radius * scale,
-                   ctx.material, ctx.emitter, as_tuple(m[:3, :3] / scale))
+    # (the switch is asked only where the scale can matter)
+    unscaled = scale != 1.0 and faults.on("sphere-radius-unscaled")
+    world_radius = radius if unscaled else radius * scale
+    shape = Sphere(tuple(float(x) for x in tf.apply_point(m, center)), world_radius,
+                   ctx.material, ctx.emitter, as_tuple(m[:3, :3] / scale),
+                   ctx.placement(center=tuple(float(x) for x in center), radius=radius))
     check_transform(t, "radius", shape.to_world(), "placement (centre and radius)")
     return shape
 

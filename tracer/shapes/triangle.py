@@ -59,7 +59,7 @@ import numpy as np
 
 from whitted.tracer import faults
 from whitted.tracer.backend import deferred, jit
-from whitted.tracer.settings import Table, Vec3, norm, norm_or_1, read_points
+from whitted.tracer.settings import Table, Vec3, norm, norm_or_1, read_local_points
 from whitted.tracer.shapes import base
 
 dr = deferred("drjit")
@@ -165,20 +165,21 @@ class Triangle(base.ShapeModel):
     vertices: tuple[Vec3, Vec3, Vec3]  # world space, after to_world
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
+    placement: base.Placement | None = base.placement_field()
 
 
 MODEL = Triangle
 
 
 def parse(t: Table, ctx: base.Context) -> Triangle:
-    verts = read_points(t, "vertices", ctx.to_world(), exactly=3)
+    local, verts = read_local_points(t, "vertices", ctx.to_world(), exactly=3)
     e1, e2 = verts[1] - verts[0], verts[2] - verts[0]
     # Relative: the sine of the angle between the edges, as float32 can resolve it.
     if not norm(np.cross(e1 / norm_or_1(e1), e2 / norm_or_1(e2))) > 2.0**-23:
         t.fail("vertices", "expected a triangle with non-zero area "
                            "(the vertices are collinear, or nearly so for float32)")
     return Triangle(tuple(tuple(float(x) for x in p) for p in verts), ctx.material,
-                    ctx.emitter)
+                    ctx.emitter, ctx.placement(points=local))
 
 
 def bounds(shape) -> tuple[np.ndarray, np.ndarray]:

@@ -42,6 +42,7 @@ with the tracer's render of the import is the report's "imported" group
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -73,6 +74,9 @@ class Finding:
     what: str        # the compared quantity ("to_world", "bsdf reflectance.to_uv", ...)
     original: str    # Mitsuba's reading of the original file
     imported: str    # Mitsuba's reading of the import
+    #: how many times the largest difference exceeds its tolerance (REL_TOL x the array's
+    #: scale); infinite where the two differ in kind, size or text, not in a number
+    excess: float = math.inf
 
     def __str__(self) -> str:
         return (f"{self.element}: {self.what}: the original reads {self.original}, "
@@ -94,6 +98,11 @@ class Structure:
     def agrees(self) -> bool:
         """No difference found (also when nothing could be compared: :attr:`unchecked`)."""
         return not self.findings
+
+    @property
+    def margin(self) -> float:
+        """How many times the largest difference exceeds its tolerance (0: agrees)."""
+        return max((f.excess for f in self.findings), default=0.0)
 
     def summary(self) -> str:
         """The one line the commands print when nothing differs."""
@@ -161,17 +170,18 @@ def _show(a) -> str:
     return f"{a.size} values"
 
 
-def _differs(a, b) -> tuple[str, str] | None:
-    """None when the two values agree within :data:`REL_TOL`, else how each reads."""
+def _differs(a, b) -> tuple[str, str, float] | None:
+    """None when the two values agree within :data:`REL_TOL`, else how each reads and how
+    many times the largest difference exceeds the tolerance (:attr:`Finding.excess`)."""
     if isinstance(a, str) or isinstance(b, str):
-        return None if str(a) == str(b) else (_show(a), _show(b))
+        return None if str(a) == str(b) else (_show(a), _show(b), math.inf)
     a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
     if a.size == 1 and b.size > 1:   # a uniform value against its colour (one per channel)
         a = np.broadcast_to(a.ravel(), b.shape)
     elif b.size == 1 and a.size > 1:
         b = np.broadcast_to(b.ravel(), a.shape)
     if a.size != b.size:
-        return f"{a.size} values", f"{b.size} values"
+        return f"{a.size} values", f"{b.size} values", math.inf
     a, b = a.ravel(), b.ravel()
     if a.size == 0:
         return None
@@ -180,13 +190,15 @@ def _differs(a, b) -> tuple[str, str] | None:
     bad = ~(d <= REL_TOL * scale)   # NaN differs too
     if not bad.any():
         return None
+    worst = float(d[bad].max()) if not np.isnan(d[bad]).any() else math.inf
+    excess = worst / (REL_TOL * scale) if scale > 0 else math.inf
     if a.size <= 16:
-        return _show(a), _show(b)
+        return _show(a), _show(b), excess
     idx = np.flatnonzero(bad)
     first = ", ".join(f"[{i}] {a[i]:.7g}" for i in idx[:SHOWN])
     other = ", ".join(f"[{i}] {b[i]:.7g}" for i in idx[:SHOWN])
     tail = f" (of {idx.size} differing values, largest difference {d[bad].max():.3g})"
-    return first + tail, other
+    return first + tail, other, excess
 
 
 def _params(mi, obj, skip_prefixes=()) -> dict:

@@ -58,7 +58,7 @@ from whitted.reference.emitters import emitter_tree as emitter_tree
 from whitted.reference.materials import bsdf_tree as bsdf_tree
 from whitted.reference.materials import plugin_names
 from whitted.reference.materials.textures import texture_tree as texture_tree
-from whitted.reference.renderers.mitsuba.tree import matrix as _matrix
+from whitted.reference.renderers.mitsuba import transforms
 from whitted.reference.shapes import mitsuba_tree
 
 # Shapes convert in their own modules (reference/shapes/), through its registry; the
@@ -66,35 +66,45 @@ from whitted.reference.shapes import mitsuba_tree
 from whitted.reference.shapes.paraboloid import PARABOLOID_DEVIATION as PARABOLOID_DEVIATION
 from whitted.reference.shapes.paraboloid import paraboloid_mesh as paraboloid_mesh
 from whitted.reference.shapes.polygon import polygon_mesh as polygon_mesh
-from whitted.tracer import transform as tf
 from whitted.tracer.scene import Instance, Scene
+
+
+def camera_steps(cam) -> tuple:
+    """The camera's ``to_world`` as steps for Mitsuba to compose: the file's own steps, or a
+    look_at of its origin, target and up (Mitsuba's ``look_at``); a camera made in code
+    with a matrix and no steps gives that matrix as one step."""
+    if cam.steps is not None:
+        return tuple(cam.steps)
+    if cam.matrix is not None:
+        return transforms.matrix_step(cam.matrix)
+    return transforms.lookat_step(cam.origin, cam.target, cam.up)
 
 
 def sensor_tree(scene: Scene, jitter: bool = False) -> dict:
     """Sensor, film and sampler; ``jitter`` places samples at random inside their strata."""
     cam, film = scene.camera, scene.film
-    look = cam.to_world()
+    look = camera_steps(cam)
     sensor = {"near_clip": ("float", cam.near_clip), "far_clip": ("float", cam.far_clip)}
     dx, dy = cam.pixel_offset
     if cam.type == "perspective":
         sensor.update(type="perspective", fov=("float", cam.fov),
-                      fov_axis=("string", cam.fov_axis), to_world=_matrix(look))
+                      fov_axis=("string", cam.fov_axis), to_world=transforms.tree(look))
         ppx = dx / film.width + cam.principal_point[0]
         ppy = dy / film.height + cam.principal_point[1]
         if ppx or ppy:  # moving the samples by (dx, dy) pixels = moving the principal point
             sensor["principal_point_offset_x"] = ("float", ppx)
             sensor["principal_point_offset_y"] = ("float", ppy)
     elif cam.matrix is not None:  # to_world given: it scales the [-1, 1]^2 view itself
-        shift = tf.translate([-2 * dx / film.width, -2 * dy / film.width, 0])
-        sensor.update(type="orthographic", to_world=_matrix(look @ shift))
+        shift = ("translate", (-2 * dx / film.width, -2 * dy / film.width, 0.0))
+        sensor.update(type="orthographic", to_world=transforms.tree((shift, *look)))
     else:
         half = cam.width / 2
         # Mitsuba's camera space has +x to the image's left and +y to its top: moving
         # the samples (dx, dy) pixels right and down moves the view by -2 dx / W, -2 dy / W
         # of half its width there.
-        shift = tf.translate([-2 * dx / film.width * half, -2 * dy / film.width * half, 0])
-        sensor.update(type="orthographic",
-                      to_world=_matrix(look @ shift @ tf.scale([half, half, 1])))
+        shift = ("translate", (-2 * dx / film.width * half, -2 * dy / film.width * half, 0.0))
+        sensor.update(type="orthographic", to_world=transforms.tree(
+            (("scale", (half, half, 1.0)), shift, *look)))
     sensor["film"] = {"type": "hdrfilm", "width": ("integer", film.width),
                       "height": ("integer", film.height), "rfilter": rfilter_tree(film),
                       "pixel_format": ("string", "rgb"),
@@ -175,6 +185,10 @@ def to_dict(tree: dict, mi) -> dict:
             props["emitter"] = mi.load_dict(to_dict(tree["emitter"], mi))
         v, f = tree["vertices"], tree["faces"]
         normals, uvs = tree["normals"], tree["uvs"]
+        if tree.get("to_world"):   # moved by Mitsuba's composition of the file's steps
+            v = transforms.move_points(mi, tree["to_world"], v)
+            if normals is not None:
+                normals = transforms.move_normals(mi, tree["to_world"], normals)
         if normals is None:
             props["face_normals"] = True
         mesh = mi.Mesh(tree["name"], len(v), len(f), props,
@@ -198,6 +212,8 @@ def to_dict(tree: dict, mi) -> dict:
             kind, val = v
             if kind == "matrix":
                 out[k] = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
+            elif kind == "steps":
+                out[k] = transforms.compose(mi, val)
             elif kind == "uvscale":
                 out[k] = mi.ScalarTransform3f().scale(mi.ScalarPoint2f(*val))
             elif kind == "uvmatrix":
@@ -260,6 +276,8 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
                  f'{pad}    <string name="filename" value={filename}/>',
                  f'{pad}    <boolean name="face_normals" value="'
                  f'{"true" if tree["normals"] is None else "false"}"/>']
+        if tree.get("to_world"):   # the file keeps the shape's own points; Mitsuba moves them
+            lines += transforms.xml_lines("to_world", tree["to_world"], pad + "    ", _fmt)
         lines += _xml(tree["bsdf"], "bsdf", indent + 1, meshes, mesh_prefix=mesh_prefix)
         if "emitter" in tree:
             lines += _xml(tree["emitter"], "emitter", indent + 1, meshes, mesh_prefix=mesh_prefix)
@@ -284,7 +302,10 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
                               mesh_prefix=mesh_prefix)
             continue
         kind, val = v
-        if kind == "matrix":
+        if kind == "steps":
+            if val:
+                lines += transforms.xml_lines(k, val, pad + "    ", _fmt)
+        elif kind == "matrix":
             flat = " ".join(_fmt(x) for row in val for x in row)
             lines += [f'{pad}    <transform name="{k}">', f'{pad}        <matrix value="{flat}"/>',
                       f"{pad}    </transform>"]
