@@ -74,14 +74,26 @@ class Mutant:
     #: one-lobe reference can see the bug
     shared: bool = False
     #: when the switch is decided: "render" (while the tracer traces its kernels, or
-    #: prepares the scene's tables), or "parse" (while the scene file is read: a
-    #: to_world composed, a sphere's radius scaled), for which the sweep reads the
-    #: scene again with the bug on
+    #: prepares the scene's tables); "parse" (while the scene file is read: a to_world
+    #: composed, a sphere's radius scaled), for which the sweep reads the scene again
+    #: with the bug on; "import" (while Mitsuba XML is imported: judged by Mitsuba's own
+    #: reading of the file, the structure verdict); "output" (while an image file is
+    #: written: judged against Mitsuba's own encoding, the files verdict)
     stage: str = "render"
+
+    @property
+    def seen_by(self) -> str:
+        """Which verdicts can see the bug, in words."""
+        return {"import": "structure", "output": "image file"}.get(
+            self.stage, "onelobe only" if self.shared else "both")
 
     @property
     def references(self) -> tuple[str, ...]:
         """The references that can see this bug."""
+        if self.stage == "import":
+            return ("structure",)
+        if self.stage == "output":
+            return ("files",)
         return ("onelobe",) if self.shared else ("deterministic", "onelobe")
 
 
@@ -365,6 +377,44 @@ CATALOG: tuple[Mutant, ...] = (
        "lat-long maps are: the map turned half a revolution.",
        "u = atan2(d.x, d.z) / (2 pi)", "u = atan2(d.x, -d.z) / (2 pi)",
        L2, "Point and directional lights", "tracer/texture.py: latlong"),
+    # --- Mitsuba XML read as Mitsuba reads it (the importer, tracer/mitsuba_xml.py) --------
+    # Judged by the structure verdict: Mitsuba's own reading of the file against its
+    # reading of the import (reference/renderers/mitsuba/original.py).
+    _m("xml-steps-reversed",
+       "The steps of a <transform> are composed last step first.",
+       "<transform> A B C -> M = A B C", "M = C B A (Mitsuba applies the first step first)",
+       L2, "Intersecting transformed objects", "tracer/mitsuba_xml.py: in_order",
+       stage="import"),
+    _m("xml-rotate-axis-normalised",
+       "A <rotate> about an axis that is not unit is taken as a rotation about its "
+       "direction, where Mitsuba 3.9.1 uses the axis as written (Rodrigues' formula with "
+       "the raw vector: a rotation, a scale and a shear).",
+       "R(a / |a|, angle)", "c I + (1 - c) a a^T + s [a]x with a as written",
+       L2, "Intersecting transformed objects", "tracer/mitsuba_xml.py: _Importer.to_world",
+       stage="import"),
+    _m("xml-fov-axis-ignored",
+       "A perspective sensor's fov_axis is dropped, so its fov is always the horizontal one.",
+       "fov_x = fov", "fov_x from fov along fov_axis (x, y, diagonal, smaller, larger)",
+       L1, "Perspective camera construction", "tracer/mitsuba_xml.py: _Importer.sensor",
+       stage="import"),
+    _m("xml-to-uv-dropped",
+       "A bitmap texture's <transform name=\"to_uv\"> is dropped: the image is shown once "
+       "instead of scaled and moved.",
+       "uv' = uv", "uv' = to_uv (u, v, 1)",
+       L2, "Interpolating normals", "tracer/mitsuba_xml.py: _Importer.texture",
+       stage="import"),
+    # --- image files (tracer/imageio.py) ----------------------------------------------------
+    # Judged by the files verdict: the tracer's PNG against Mitsuba's own sRGB encoding.
+    _m("png-gamma-2.2",
+       "The PNG writer encodes with a plain gamma of 2.2 instead of the sRGB curve.",
+       "code = round(255 x^(1/2.2))",
+       "code = round(255 (12.92 x if x <= 0.0031308 else 1.055 x^(1/2.4) - 0.055)), "
+       "IEC 61966-2-1", L1, "Quick radiometry recap", "tracer/imageio.py: to_srgb8",
+       stage="output"),
+    _m("png-truncated",
+       "The PNG writer truncates to 8 bits instead of rounding: every code up to one low.",
+       "code = floor(255 srgb(x))", "code = round(255 srgb(x))",
+       L1, "Quick radiometry recap", "tracer/imageio.py: to_srgb8", stage="output"),
     _m("classic-reflection-tinted",
        "In Whitted's model the reflected ray is tinted by the surface colour.",
        "I = ... + ks colour S", "I = ... + ks S",
@@ -437,10 +487,16 @@ def sweep_size(scene, quick: bool):
 
 @dataclass
 class Unit:
-    """One verdict of a scene, as ``whitted compare`` judges it, with its reference kept."""
-    label: str          # "deterministic", "tracer-only model", "second opinion"
-    reference: str      # "deterministic" or "onelobe"
-    test: str           # "exact-strata", "tessellated" or "z-test"
+    """One verdict of a scene, as ``whitted compare`` judges it, with its reference kept.
+
+    Besides the image verdicts, two that judge what no image comparison sees: the
+    tracer's PNG file against Mitsuba's own sRGB encoding of the same image
+    (``files``, :mod:`reference.verdicts.files`), and the scene written as Mitsuba XML
+    (``whitted export``) and imported back, against Mitsuba's reading of that file
+    (``structure``, :mod:`reference.renderers.mitsuba.original`)."""
+    label: str          # "deterministic", "tracer-only model", "second opinion", ...
+    reference: str      # "deterministic", "onelobe", "files" or "structure"
+    test: str           # "exact-strata", "tessellated", "z-test", "png" or "structure"
     scene: object
     ref: object         # an image (deterministic) or a ReferenceResult (onelobe)
     reached: frozenset = frozenset()
@@ -448,20 +504,54 @@ class Unit:
     clean_margin: float = 0.0
     clean_check: str = ""
     clean_passed: bool = True
+    #: the tracer's clean image (deterministic units; the files unit's input)
+    image: object = None
+    #: the Mitsuba XML file the structure unit imports
+    xml: Path | None = None
 
     def judge(self, tracer_image=None, scene=None) -> dict:
         """The verdict's checks for a tracer image (the tracer renders here for z-tests, of
         ``scene``, by default the unit's own)."""
         from whitted.reference.verdicts.compare import image_metrics, judge, statistical_verdict
 
+        if self.reference == "structure":
+            from whitted.reference.renderers.mitsuba.original import compare_structure
+
+            s = compare_structure(self.xml)
+            return {"structure": {"value": s.margin, "limit": 1.0, "pass": s.agrees}}
+        if self.reference == "files":
+            from whitted.reference import mitsuba
+            from whitted.reference.verdicts.files import png_checks
+
+            return png_checks(self.image, mitsuba())
         if self.reference == "onelobe":
             return statistical_verdict(scene or self.scene, self.ref, tracer_image,
                                        regions=self.regions, with_flip=False).verdict.checks
         metrics = image_metrics(tracer_image, self.ref, with_flip=False)
         return judge(self.test, metrics, tracer_image, self.ref)[0].checks
 
+    def judge_clean(self) -> None:
+        """The tracer as written: its checks, and which switches the verdict asked about."""
+        from whitted.reference.verdicts.compare import shared_tracer_image
 
-def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
+        with faults.recording() as asked:
+            image = shared_tracer_image(self.scene) if self.renders_tracer else None
+            checks = self.judge(image)
+        if image is not None:
+            self.image = image
+        self.reached = frozenset(asked)
+        self.clean_margin, self.clean_check = margin(checks)
+        self.clean_passed = all(c["pass"] for c in checks.values())
+
+    @property
+    def renders_tracer(self) -> bool:
+        """Whether the verdict takes a tracer image rendered here (the deterministic
+        reference's); the one-lobe verdict renders its own, the others none."""
+        return self.reference == "deterministic"
+
+
+def scene_units(scene, log: Callable[[str], None] | None = None,
+                workdir: Path | None = None) -> list[Unit]:
     """The verdicts ``whitted compare`` gives ``scene``, each with its reference rendered once.
 
     As :func:`reference.verdicts.compare.compare_scene`: the scene with declared
@@ -469,6 +559,9 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
     a declared part with a harness model (Schlick) is judged as it is against
     the deterministic reference with that model; an area-lit scene also gets
     the one-lobe reference's statistical verdict at the second opinion's size.
+    Then the tracer's PNG of the deterministic verdict's image (``files``) and, with a
+    ``workdir`` to write it in, the scene exported as Mitsuba XML and imported back
+    (``structure``; a scene the importer refuses, such as the classic model's, has none).
     Each unit's clean verdict, and which switches its render reached, are recorded.
     """
     from whitted.reference.materials import has_tracer_only_models
@@ -479,7 +572,6 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         comparable,
         regions_of,
         second_opinion_scene,
-        shared_tracer_image,
         ztest_passes,
     )
     from whitted.tracer.integrator import material_ids
@@ -503,13 +595,65 @@ def scene_units(scene, log: Callable[[str], None] | None = None) -> list[Unit]:
         units.append(Unit("second opinion" if units else "onelobe", "onelobe", "z-test", small,
                           ref, regions=regions_of(material_ids(small), list(small.materials))))
     for u in units:
-        with faults.recording() as asked:
-            image = None if u.reference == "onelobe" else shared_tracer_image(u.scene)
-            checks = u.judge(image)
-        u.reached = frozenset(asked)
-        u.clean_margin, u.clean_check = margin(checks)
-        u.clean_passed = all(c["pass"] for c in checks.values())
-    return units
+        u.judge_clean()
+    extra = []
+    if units[0].image is not None:
+        extra.append(Unit("image file", "files", "png", scene, None, image=units[0].image))
+    xml = _exported(full, workdir) if workdir is not None else None
+    if xml is not None:
+        extra.append(Unit("structure", "structure", "structure", full, None, xml=xml))
+    for u in extra:
+        u.judge_clean()
+    return units + extra
+
+
+def _exported(scene, workdir: Path) -> Path | None:
+    """The scene written as Mitsuba XML into ``workdir`` (``whitted export``), or None where
+    the importer refuses the file (it holds a kind only the harness's plugins know)."""
+    from whitted.reference.renderers.mitsuba.scene import write_xml
+    from whitted.tracer.errors import UserError
+    from whitted.tracer.mitsuba_xml import read_xml
+
+    folder = workdir / scene.name
+    folder.mkdir(parents=True, exist_ok=True)
+    path = folder / f"{scene.name}.xml"
+    write_xml(scene, path, integrator="direct")
+    try:
+        read_xml(path)
+    except UserError:
+        return None
+    return path
+
+
+def xml_unit(name: str, path: Path) -> Unit:
+    """The structure verdict of a Mitsuba XML file (the importer judged by Mitsuba's own
+    reading of it), judged as the tracer's importer is written."""
+    u = Unit("structure", "structure", "structure", name, None, xml=Path(path))
+    u.judge_clean()
+    return u
+
+
+def structure_sources(pattern: str | None = None) -> list[tuple[str, Path]]:
+    """Mitsuba's own scenes (package data, :mod:`whitted.scenes`) whose import the sweep
+    judges by Mitsuba's reading of the file: the report's imported group, a bitmap under
+    ``to_uv`` (``texture_interp``) and a rotation about an unnormalised axis (``hello``);
+    with a glob ``pattern``, those whose file name matches it."""
+    import fnmatch
+
+    from whitted.reference.renderers.mitsuba.importer import (
+        MITSUBA_DATA,
+        MITSUBA_DATA_DIR,
+        imported_cases,
+    )
+
+    out = [(f"{c.xml.stem}.xml", c.xml) for c in imported_cases(True) if c.xml is not None]
+    out.append(("test_texture_interp_direct.xml",
+                MITSUBA_DATA / "texture_interp" / "test_texture_interp_direct.xml"))
+    out.append(("hello.xml", MITSUBA_DATA_DIR / "scenes" / "hello.xml"))
+    if pattern:
+        out = [(n, p) for n, p in out if fnmatch.fnmatch(n, pattern)
+               or fnmatch.fnmatch(p.stem, pattern)]
+    return out
 
 
 @dataclass
@@ -593,11 +737,17 @@ class SweepResult:
 
 def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: bool = True,
           log: Callable[[str], None] = print,
-          between: Callable[[], None] | None = None) -> SweepResult:
+          between: Callable[[], None] | None = None,
+          xml_sources: list[tuple[str, Path]] = ()) -> SweepResult:
     """Judge the tracer as written and with each bug on every scene (module docstring).
 
-    ``between()``, when given, is called before each scene and each bug's judgement
-    (``whitted report``: reference.renderers.luxcore.render.SharedCores.poll)."""
+    ``xml_sources``: (name, path) of Mitsuba XML files judged by the structure verdict
+    alone (:func:`structure_sources`), after the scenes. ``between()``, when given, is
+    called before each scene and each bug's judgement (``whitted report``:
+    reference.renderers.luxcore.render.SharedCores.poll)."""
+    import shutil
+    import tempfile
+
     from whitted.tracer import load_scene
 
     start = time.perf_counter()
@@ -609,41 +759,53 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     for p in scene_paths:   # validated first; the switches asked while each file is read
         with faults.recording() as asked:
             scenes.append((p, sweep_size(load_scene(p), quick), frozenset(asked)))
-    for i, (path, scene, read_asked) in enumerate(scenes, 1):
-        t0 = time.perf_counter()
-        if between is not None:
-            between()
-        units = scene_units(scene)
-        clean = all(u.clean_passed for u in units)
-        reached = frozenset().union(*(u.reached for u in units), read_asked)
-        todo = [m for m in mutants if m.id in reached]
-        for m in todo:
-            r = results[m.id]
+    total = len(scenes) + len(xml_sources)
+    workdir = Path(tempfile.mkdtemp(prefix="whitted-sweep-"))
+    try:
+        jobs = [(scene.name, (scene.film.width, scene.film.height), scene.film.strata ** 2,
+                 lambda scene=scene: scene_units(scene, workdir=workdir), read_asked,
+                 lambda p=path: sweep_size(load_scene(p), quick))
+                for path, scene, read_asked in scenes]
+        jobs += [(name, (0, 0), 0, lambda n=name, x=xml: [xml_unit(n, x)], frozenset(), None)
+                 for name, xml in xml_sources]
+        for i, (name, size, spp, make_units, read_asked, reread) in enumerate(jobs, 1):
+            t0 = time.perf_counter()
             if between is not None:
                 between()
-            t1 = time.perf_counter()
-            outcome = _judge_mutant(m, units, lambda p=path: sweep_size(load_scene(p), quick))
-            r.seconds += time.perf_counter() - t1
-            if isinstance(outcome, Catch):
-                outcome.scene = scene.name
-                r.caught_by.append(outcome)
-            elif outcome == "blind":
-                r.blind.append(scene.name)
-            elif outcome.startswith("error"):
-                r.errors.append(f"{scene.name}: {outcome}")
-            else:
-                r.passed.append(scene.name)
-        seconds = time.perf_counter() - t0
-        scenes_out.append(SceneResult(
-            scene.name, (scene.film.width, scene.film.height), scene.film.strata ** 2,
-            [{"verdict": u.label, "reference": u.reference, "test": u.test,
-              "pass": u.clean_passed, "margin": u.clean_margin, "check": u.clean_check}
-             for u in units], clean, seconds))
-        log(f"[{i}/{len(scenes)}] {scene.name:<22} tracer as written: "
-            f"{'pass' if clean else 'FAIL'} (margin {max(u.clean_margin for u in units):.2f}); "
-            f"{len(todo)} mutants reach it, "
-            f"{sum(1 for m in todo if any(c.scene == scene.name for c in results[m.id].caught_by))}"
-            f" caught ({seconds:.1f} s)")
+            units = make_units()
+            clean = all(u.clean_passed for u in units)
+            reached = frozenset().union(*(u.reached for u in units), read_asked)
+            todo = [m for m in mutants if m.id in reached]
+            for m in todo:
+                r = results[m.id]
+                if between is not None:
+                    between()
+                t1 = time.perf_counter()
+                outcome = _judge_mutant(m, units, reread)
+                r.seconds += time.perf_counter() - t1
+                if isinstance(outcome, Catch):
+                    outcome.scene = name
+                    r.caught_by.append(outcome)
+                elif outcome == "blind":
+                    r.blind.append(name)
+                elif outcome.startswith("error"):
+                    r.errors.append(f"{name}: {outcome}")
+                else:
+                    r.passed.append(name)
+            seconds = time.perf_counter() - t0
+            scenes_out.append(SceneResult(
+                name, size, spp,
+                [{"verdict": u.label, "reference": u.reference, "test": u.test,
+                  "pass": u.clean_passed, "margin": u.clean_margin, "check": u.clean_check}
+                 for u in units], clean, seconds))
+            caught = sum(1 for m in todo if any(c.scene == name
+                                                for c in results[m.id].caught_by))
+            log(f"[{i}/{total}] {name:<22} tracer as written: "
+                f"{'pass' if clean else 'FAIL'} "
+                f"(margin {max(u.clean_margin for u in units):.2f}); "
+                f"{len(todo)} mutants reach it, {caught} caught ({seconds:.1f} s)")
+    finally:
+        shutil.rmtree(workdir, ignore_errors=True)
     return SweepResult(quick, scenes_out, list(results.values()),
                        time.perf_counter() - start)
 
@@ -653,7 +815,9 @@ def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
 
     A bug decided while the file is read (``stage == "parse"``) is judged on the scene
     read again with it on (``reread()``): its camera, lights and shapes replace those of
-    each verdict's scene, whose film and materials stay the verdict's own."""
+    each image verdict's scene, whose film and materials stay the verdict's own. The
+    files and structure verdicts judge the bugs whose switches they asked about (the
+    image writer's, the importer's and what the import reads of the tracer)."""
     from dataclasses import replace
 
     from whitted.reference.verdicts.compare import (
@@ -661,7 +825,8 @@ def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
     )
 
     fresh = None
-    if m.stage == "parse" and reread is not None:
+    images = [u for u in units if u.reference in ("deterministic", "onelobe")]
+    if m.stage == "parse" and reread is not None and images:
         try:
             with faults.active(m.id):
                 fresh = reread()
@@ -670,17 +835,17 @@ def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
     seen_by_any = False
     for u in units:
         scene = u.scene
-        if fresh is not None:
+        if fresh is not None and u in images:
             scene = replace(u.scene, camera=fresh.camera, lights=fresh.lights,
                             shapes=fresh.shapes, groups=fresh.groups)
         elif m.id not in u.reached:
-            continue          # this verdict's render never asks for the switch
+            continue          # this verdict never asks for the switch
         if m.shared and u.reference == "deterministic":
             continue          # the reference reads the same code: blind by construction
         seen_by_any = True
         try:
             with faults.active(m.id):
-                image = None if u.reference == "onelobe" else shared_tracer_image(scene)
+                image = shared_tracer_image(scene) if u.renders_tracer else None
                 checks = u.judge(image, scene)
         except Exception as e:  # a bug that crashes the tracer is not a catch of the harness
             return f"error: {type(e).__name__}: {e}"
@@ -694,8 +859,8 @@ def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
 
 
 def format_margin(x: float) -> str:
-    if math.isinf(x):
-        return "inf (NaN)"
+    if math.isinf(x):   # a NaN image, or a structure that differs in kind or size
+        return "inf"
     return f"{x:.3g}"
 
 
@@ -713,7 +878,7 @@ def format_table(result: SweepResult) -> str:
     lines.append(f"{'mutant':<{width}}  {'reference':<13} {'caught':>6}  "
                  f"{'strongest (margin)':<34} scenes whose verdict fails (margin)")
     for m in result.mutants:
-        ref = "onelobe only" if m.references == ["onelobe"] else "both"
+        ref = BY_ID[m.id].seen_by if m.id in BY_ID else "both"
         best = m.strongest
         strongest = (f"{best.scene} ({format_margin(best.margin)}, {best.check})"
                      if best else "NOT CAUGHT")

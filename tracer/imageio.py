@@ -26,6 +26,7 @@ from pathlib import Path
 
 import numpy as np
 
+from whitted.tracer import faults
 from whitted.tracer.errors import UserError
 
 FORMATS = (".exr", ".png", ".ppm")
@@ -192,6 +193,12 @@ def srgb_encode(linear: np.ndarray) -> np.ndarray:
 
 
 def to_srgb8(image: np.ndarray) -> np.ndarray:
+    """8-bit sRGB codes of a linear image (IEC 61966-2-1), clipped to [0, 1] and rounded."""
+    if faults.on("png-gamma-2.2"):
+        x = np.clip(np.nan_to_num(image), 0, 1)
+        return np.round(np.power(x, 1 / 2.2) * 255).astype(np.uint8)
+    if faults.on("png-truncated"):
+        return np.floor(srgb_encode(np.nan_to_num(image)) * 255).astype(np.uint8)
     return np.round(srgb_encode(np.nan_to_num(image)) * 255).astype(np.uint8)
 
 

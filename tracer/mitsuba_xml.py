@@ -52,7 +52,7 @@ from pathlib import Path
 
 import numpy as np
 
-from whitted.tracer import spectra
+from whitted.tracer import faults, spectra
 from whitted.tracer import transform as tf
 from whitted.tracer.errors import UserError
 from whitted.tracer.files import NotRegularFile, read_regular, special_kind
@@ -447,7 +447,15 @@ def transform_matrix(node: Node) -> np.ndarray:
         else:
             raise XMLImportError(f"{s.where()}: unknown transform step (expected translate, "
                                  "rotate, scale, matrix or lookat)")
-    return tf.compose(steps)
+    return tf.compose(in_order(steps))
+
+
+def in_order(steps: list) -> list:
+    """A ``<transform>``'s steps in the order Mitsuba applies them: as written, the first
+    step first (its parser multiplies each new step on the left)."""
+    if len(steps) > 1 and faults.on("xml-steps-reversed"):
+        return steps[::-1]
+    return steps
 
 
 # ---------------------------------------------------------------- the importer
@@ -656,7 +664,8 @@ class _Importer:
                     bm[k] = self.string(p[k])
             if "raw" in p:
                 bm["raw"] = self.boolean(p["raw"])
-            if "to_uv" in p:   # Mitsuba's bitmap: the 4x4's 2D affine part (x, y, translation)
+            if "to_uv" in p and not faults.on("xml-to-uv-dropped"):
+                # Mitsuba's bitmap: the 4x4's 2D affine part (x, y, translation)
                 m = transform_matrix(p["to_uv"])
                 rows = [[float(m[i, 0]), float(m[i, 1]), float(m[i, 3])] for i in (0, 1)]
                 if rows != [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]:
@@ -681,7 +690,7 @@ class _Importer:
                 axis, angle = _xyz(s), _attr_number(s, "angle", 0.0)
                 if not any(axis):
                     raise XMLImportError(f"{s.where()}: a rotation needs a non-zero axis")
-                if unit_axis(axis):
+                if unit_axis(axis) or faults.on("xml-rotate-axis-normalised"):
                     steps.append({"rotate": {"axis": axis, "angle": angle}})
                     continue
                 self.caution(s, f"a rotation axis of length "
@@ -694,7 +703,7 @@ class _Importer:
             else:
                 break
         else:
-            return steps
+            return in_order(steps)
         m = transform_matrix(node)
         return [{"matrix": [[float(x) for x in row] for row in m]}]
 
@@ -822,6 +831,8 @@ class _Importer:
             if "fov" in p:
                 cam["fov"] = float(self.number(p["fov"]))
                 cam["fov_axis"] = self.string(p.get("fov_axis"), "x").lower()
+                if "fov_axis" in p and faults.on("xml-fov-axis-ignored"):
+                    cam["fov_axis"] = "x"
             else:  # Mitsuba: a 35 mm film's diagonal (36 x 24 mm) at this focal length
                 text = self.string(p.get("focal_length"), "50mm")
                 f = _number(p.get("focal_length") or node, text.lower().removesuffix("mm"),

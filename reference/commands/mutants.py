@@ -61,10 +61,12 @@ def run(args) -> int:
         load_scene(p)
     use_backend(args)
     size = "full" if args.full else "quick"
-    print(f"whitted mutants: {len(chosen)} mutant(s) x {len(paths)} scene(s), {size} sizes",
+    print(f"whitted mutants: {len(chosen)} mutant(s) x {len(paths)} scene(s) and "
+          f"{len(mutants.structure_sources(args.scenes))} Mitsuba XML file(s), {size} sizes",
           flush=True)
     result = mutants.sweep(paths, chosen, quick=not args.full,
-                           log=lambda m: print(m, flush=True))
+                           log=lambda m: print(m, flush=True),
+                           xml_sources=mutants.structure_sources(args.scenes))
     print(mutants.format_table(result))
     if out is not None:
         from whitted.reference.verdicts.compare import write_json

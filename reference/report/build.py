@@ -146,8 +146,9 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     """Compare every scene, tabulate the Fresnel curves, write the three report files.
 
     ``mutants``: also run the formula-bug sweep of :mod:`reference.mutants` over the
-    same scenes (its quick sizes for a quick report, the scenes' own otherwise); the
-    report then passes only if every bug is caught.
+    same scenes (its quick sizes for a quick report, the scenes' own otherwise) and
+    Mitsuba's own XML files of :func:`reference.mutants.structure_sources` (the
+    importer's bugs); the report then passes only if every bug is caught.
 
     ``luxcore``: also the three-way verdict of each scene with LuxCore
     (:mod:`reference.renderers.luxcore.vote`, one LuxCore child process for all scenes). The
@@ -321,7 +322,8 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
         log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
             f"({'quick' if quick else 'full'} sizes)")
         sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m),
-                                   between=between)
+                                   between=between,
+                                   xml_sources=mutant_sweep.structure_sources())
         report.mutants = sweep.to_json()
         report.passed &= sweep.passed
         log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
@@ -570,7 +572,9 @@ def _mutants_markdown(mu: dict) -> str:
     lines = [f"## Formula bugs: {'PASS' if mu['pass'] else '**FAIL**'}", "",
              f"{len(mu['mutants'])} plausible bugs of the lectures' formulas "
              "(`reference/mutants.py`, `whitted mutants --list`), each switched into the "
-             f"tracer in turn and judged on every scene as `whitted compare` judges it, at "
+             f"tracer in turn and judged on every scene as `whitted compare` judges it (the "
+             "importer's by Mitsuba's reading of XML files, the image writer's against "
+             "Mitsuba's sRGB encoding), at "
              f"{'quick' if mu['quick'] else 'full'} sizes ({mu['seconds']:.0f} s). The "
              f"tracer as written passes {sum(s['passed'] for s in mu['scenes'])} of "
              f"{len(mu['scenes'])} scenes. Margin: how many times the most violated check of "
@@ -862,7 +866,12 @@ def _mutants_html(mu: dict) -> str:
             "caught by a scene whose verdict fails; its <b>margin</b> is how many times the "
             "most violated check exceeds its limit. Bugs in code the deterministic reference "
             "shares with the tracer (its pixel positions and light samples) are seen only "
-            "by the one-lobe reference, which runs on scenes with area lights.</p>"
+            "by the one-lobe reference, which runs on scenes with area lights. Bugs of the "
+            "Mitsuba XML importer are judged by the <i>structure</i> verdict (each scene "
+            "written by <code>whitted export</code> and imported back, and Mitsuba's own "
+            "XML files, against Mitsuba's reading of the file), bugs of the image writer by "
+            "the <i>image file</i> verdict (the tracer's PNG against Mitsuba's sRGB "
+            "encoding of the same image).</p>"
             "<table><tr><th>mutant</th><th>bug</th><th>lecture topic</th><th>seen by</th>"
             "<th>scenes failing</th><th>strongest catch (margin, check)</th>"
             "<th>weakest catch</th></tr>" + "".join(rows) + "</table>"
