@@ -11,7 +11,9 @@ disagreement to investigate. Usage (from the repository root)::
 
 Rendering is the slow part (about 10 minutes on 2 cores), so each comparison's
 inputs to :func:`reference.verdicts.compare.judge` (the two images and the noise)
-are kept in ``out/false_alarms/`` and judged again by the rules of the working
+are kept in ``out/false_alarms/`` (NumPy ``.npz`` files read without pickle, with
+their metadata as JSON: data, checked when read, never code) and judged again by
+the rules of the working
 tree or, with ``--rules REV``, by ``reference/verdicts/compare.py`` as it was at
 git revision REV (``--rules 2f3d0c0`` gives the rules before issue 28's
 calibration): the same renders judged by both, so the two rates differ only by
@@ -22,9 +24,11 @@ false-alarm rate, with its 95 % (Clopper-Pearson) upper bound.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import glob
 import importlib.util
-import pickle
+import inspect
+import json
 import subprocess
 import sys
 import tempfile
@@ -63,9 +67,9 @@ def render(path: str, approximate: bool, seed: int) -> list[tuple]:
     calls = []
     judge = compare.judge
 
-    def capture(test_name, metrics, t, r, noise=None):
+    def capture(test_name, metrics, t, r, noise=None, scene=None):
         calls.append((test_name, np.asarray(t), np.asarray(r), noise))
-        return judge(test_name, metrics, t, r, noise)
+        return judge(test_name, metrics, t, r, noise, scene=scene)
 
     scene = load_any(path, approximate, warn=lambda line: None).with_overrides(
         spp=SPP, size=SIZE)
@@ -94,12 +98,70 @@ def rules_module(rev: str | None):
     return mod
 
 
-def judged(mod, calls) -> tuple[bool, list[str]]:
-    """All calls passed by ``mod``'s rules, and the failing checks."""
+def save_calls(path: Path, calls: list) -> None:
+    """The calls as one .npz: arrays by name, the rest as JSON (no pickle)."""
+    arrays, meta = {}, []
+    for i, (test_name, t, r, noise) in enumerate(calls):
+        arrays[f"{i}.t"], arrays[f"{i}.r"] = t, r
+        entry = {"test": test_name, "noise": None}
+        if noise is not None:
+            fields = {}
+            for f in dataclasses.fields(noise):
+                v = getattr(noise, f.name)
+                if isinstance(v, np.ndarray):
+                    arrays[f"{i}.{f.name}"] = v
+                    fields[f.name] = "array"
+                elif isinstance(v, dict):
+                    for k, m in v.items():
+                        arrays[f"{i}.{f.name}.{k}"] = m
+                    fields[f.name] = {"regions": list(v)}
+                else:
+                    fields[f.name] = v
+            entry["noise"] = fields
+        meta.append(entry)
+    arrays["meta"] = np.array(json.dumps(meta))
+    with open(path, "wb") as f:
+        np.savez(f, **arrays)
+
+
+def load_calls(path: Path) -> list | None:
+    """The calls kept at ``path``, or None for anything unreadable (then rendered again)."""
+    from whitted.reference.verdicts.compare import Noise
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            calls = []
+            for i, entry in enumerate(meta):
+                t, r = z[f"{i}.t"], z[f"{i}.r"]
+                if t.shape != r.shape or t.ndim != 3 or not isinstance(entry["test"], str):
+                    return None
+                noise = None
+                if entry["noise"] is not None:
+                    kw = {}
+                    for name, v in entry["noise"].items():
+                        if v == "array":
+                            kw[name] = z[f"{i}.{name}"]
+                        elif isinstance(v, dict):
+                            kw[name] = {k: z[f"{i}.{name}.{k}"] for k in v["regions"]}
+                        else:
+                            kw[name] = v
+                    noise = Noise(**kw)
+                calls.append((entry["test"], t, r, noise))
+            return calls
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def judged(mod, calls, scene=None) -> tuple[bool, list[str]]:
+    """All calls passed by ``mod``'s rules, and the failing checks; ``scene`` for rules
+    whose exact-strata median depends on it."""
     failed = []
+    takes_scene = "scene" in inspect.signature(mod.judge).parameters
     for test_name, t, r, noise in calls:
         metrics = mod.image_metrics(t, r, with_flip=False)
-        verdict, _ = mod.judge(test_name, metrics, t, r, noise)
+        verdict, _ = (mod.judge(test_name, metrics, t, r, noise, scene=scene) if takes_scene
+                      else mod.judge(test_name, metrics, t, r, noise))
         failed += [f"{test_name}:{k}={c['value']:.4g}" for k, c in verdict.checks.items()
                    if not c["pass"]]
     return not failed, failed
@@ -134,19 +196,21 @@ def main(argv=None) -> int:
         if args.only and args.only not in path:
             continue
         name = Path(path).relative_to(ROOT / "tests/data/real_scenes").as_posix()
+        from whitted.tracer.scene import load_any
+
+        scene = load_any(path, approximate, warn=lambda line: None)
         for seed in SEEDS:
-            key = CACHE / (name.replace("/", "__") + f".seed{seed}.pkl")
-            if key.exists():
-                calls = pickle.loads(key.read_bytes())
-            else:
+            key = CACHE / (name.replace("/", "__") + f".seed{seed}.npz")
+            calls = load_calls(key) if key.exists() else None
+            if calls is None:
                 try:
                     calls = render(path, approximate, seed)
                 except Exception as e:  # noqa: BLE001 - reported, not counted
                     print(f"{name} seed {seed}: not compared ({type(e).__name__}: {e})",
                           flush=True)
                     continue
-                key.write_bytes(pickle.dumps(calls))
-            ok, failed = judged(mod, calls)
+                save_calls(key, calls)
+            ok, failed = judged(mod, calls, scene)
             fails += not ok
             rows.append((name, approximate, seed, ok, failed))
             print(f"{'pass' if ok else 'FAIL'}  {name}{' (--approximate)' if approximate else ''}"

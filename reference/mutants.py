@@ -528,7 +528,8 @@ class Unit:
             return statistical_verdict(scene or self.scene, self.ref, tracer_image,
                                        regions=self.regions, with_flip=False).verdict.checks
         metrics = image_metrics(tracer_image, self.ref, with_flip=False)
-        return judge(self.test, metrics, tracer_image, self.ref)[0].checks
+        verdict, _ = judge(self.test, metrics, tracer_image, self.ref, scene=scene or self.scene)
+        return verdict.checks
 
     def judge_clean(self) -> None:
         """The tracer as written: its checks, and which switches the verdict asked about."""

@@ -453,9 +453,8 @@ def transform_matrix(node: Node) -> np.ndarray:
 def in_order(steps: list) -> list:
     """A ``<transform>``'s steps in the order Mitsuba applies them: as written, the first
     step first (its parser multiplies each new step on the left)."""
-    if len(steps) > 1 and faults.on("xml-steps-reversed"):
-        return steps[::-1]
-    return steps
+    reverse = len(steps) > 1 and faults.on("xml-steps-reversed")
+    return steps[::-1] if reverse else steps
 
 
 # ---------------------------------------------------------------- the importer
@@ -830,9 +829,8 @@ class _Importer:
                 raise XMLImportError(f"{node.where()}: give fov or focal_length, not both")
             if "fov" in p:
                 cam["fov"] = float(self.number(p["fov"]))
-                cam["fov_axis"] = self.string(p.get("fov_axis"), "x").lower()
-                if "fov_axis" in p and faults.on("xml-fov-axis-ignored"):
-                    cam["fov_axis"] = "x"
+                ignored = "fov_axis" in p and faults.on("xml-fov-axis-ignored")
+                cam["fov_axis"] = "x" if ignored else self.string(p.get("fov_axis"), "x").lower()
             else:  # Mitsuba: a 35 mm film's diagonal (36 x 24 mm) at this focal length
                 text = self.string(p.get("focal_length"), "50mm")
                 f = _number(p.get("focal_length") or node, text.lower().removesuffix("mm"),

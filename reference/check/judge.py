@@ -699,7 +699,7 @@ def check_image(user, scene, spp: int | None = None, thresholds: Thresholds | No
         mref.spread = reference.spread
         m = image_metrics(reference.image.astype(np.float32), mref.image.astype(np.float32),
                           with_flip=False)
-        verdict, _ = judge("exact-strata", m, reference.image, mref.image)
+        verdict, _ = judge("exact-strata", m, reference.image, mref.image, scene=scene)
         run.reference_vs_mitsuba = {"test": verdict.test, "passed": verdict.passed,
                                     "checks": verdict.checks}
         run.mitsuba = judge_image(user, mref, ids, names, model, thresholds)

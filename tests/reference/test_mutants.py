@@ -148,7 +148,8 @@ def test_mutants_command_exit_codes(capsys, tmp_path):
 
 
 def test_every_bug_is_caught_and_the_tracer_as_written_passes_every_scene():
-    result = mutants.sweep(BUILTIN, quick=True, log=lambda _: None)
+    result = mutants.sweep(BUILTIN, quick=True, log=lambda _: None,
+                           xml_sources=mutants.structure_sources())
     report = mutants.format_table(result)
     failing = [s.name for s in result.scenes if not s.passed]
     assert not failing, report
@@ -161,6 +162,14 @@ def test_every_bug_is_caught_and_the_tracer_as_written_passes_every_scene():
             # second opinion, or as the main verdict of a scene it judges (shape_lights)
             assert {c.verdict for c in m.caught_by} <= {"second opinion", "onelobe"}
             assert "second opinion" in {c.verdict for c in m.caught_by}
+        stage = mutants.BY_ID[m.id].stage
+        if stage == "import":     # only Mitsuba's own reading of the XML can see it
+            assert {c.verdict for c in m.caught_by} == {"structure"}, m.id
+        if stage == "output":     # only the PNG against Mitsuba's encoding can see it
+            assert {c.verdict for c in m.caught_by} == {"image file"}, m.id
+        if mutants.BY_ID[m.id].shared or stage == "parse":
+            # code both sides could read: caught by a margin of 10 or more somewhere
+            assert m.strongest.margin >= 10, (m.id, m.strongest)
     # The report's section renders the same result.
     data = result.to_json()
     assert "NOT CAUGHT" not in _mutants_markdown(data)
@@ -169,7 +178,8 @@ def test_every_bug_is_caught_and_the_tracer_as_written_passes_every_scene():
 
 @pytest.mark.slow
 def test_every_bug_is_caught_at_the_scenes_own_sizes():
-    result = mutants.sweep(BUILTIN, quick=False, log=lambda _: None)
+    result = mutants.sweep(BUILTIN, quick=False, log=lambda _: None,
+                           xml_sources=mutants.structure_sources())
     assert result.passed, mutants.format_table(result)
 
 

@@ -245,7 +245,7 @@ def judge_pair(scene, a: Side, b: Side, regions: dict) -> dict:
     if ref.variance is None and test.variance is None:
         # neither side random (no area light): the float-precision verdict
         kind = "tessellated" if scene.has_tessellated() else "exact-strata"
-        verdict, _ = judge(kind, metrics, test.image, ref.image)
+        verdict, _ = judge(kind, metrics, test.image, ref.image, scene=scene)
     else:
         zero = np.zeros_like(ref.image, dtype=np.float64)
         ref_var = zero if ref.variance is None else ref.variance

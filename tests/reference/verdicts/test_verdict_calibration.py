@@ -8,13 +8,19 @@ still fails. The rules' derivations are in docs/verdicts.md.
 
 from __future__ import annotations
 
+from dataclasses import replace
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from whitted.reference.verdicts.compare import (
     EXACT_LIMITS,
     block_metrics,
     image_metrics,
     judge,
+    largest_bilinear_texture,
+    median_limit,
     student_t_quantile,
     student_t_tail,
     z_test,
@@ -135,3 +141,44 @@ def test_block_median_judges_what_noise_cannot_explain():
     assert block_metrics(t, r, var)["block_median_rel"] < 0.01
     # a 30 % bias everywhere (well beyond the noise) still fails
     assert block_metrics(t * 1.3, r, var)["block_median_rel"] > 0.01
+
+
+# --- exact-strata's median on scenes with a large bilinear bitmap (docs/verdicts.md,
+# "The median"): mitsuba-data's test_spot_direct projects a 1920 x 1080 binary pattern.
+
+SPOT = (Path(__file__).resolve().parents[2] / "data" / "real_scenes" / "mitsuba-data" /
+        "tests" / "scenes" / "spot_light" / "test_spot_direct.xml")
+
+
+def test_median_limit_grows_with_the_largest_bilinear_bitmap():
+    from whitted.tracer.scene import load_any
+
+    scene = load_any(SPOT)
+    assert largest_bilinear_texture(scene) == 1920
+    assert median_limit(scene) == pytest.approx(4 * 2.0 ** -24 * 1920)   # 4.6e-4
+    assert median_limit(None) == EXACT_LIMITS["median_rel"]
+    # nearest filtering moves no value by a fraction of a texel: the float32 limit
+    (i, spot), = [(i, x) for i, x in enumerate(scene.lights) if hasattr(x, "texture")
+                  and x.texture is not None]
+    nearest = replace(spot, texture=replace(spot.texture, filter_type="nearest"))
+    lights = list(scene.lights)
+    lights[i] = nearest
+    assert median_limit(replace(scene, lights=tuple(lights))) == EXACT_LIMITS["median_rel"]
+
+
+def test_a_large_projected_pattern_passes_and_a_wrong_spot_uv_still_fails():
+    """The tracer as written passes test_spot_direct (median 7.7e-5: above the float32
+    limit of 1e-5 that failed it, below 4 u R); the spot's uv centred at 0 still fails."""
+    from whitted.reference.verdicts.compare import compare_scene
+    from whitted.tracer import faults
+    from whitted.tracer.scene import load_any
+
+    scene = load_any(SPOT).with_overrides(size=(64, 48), spp=16)
+    result, _, _ = compare_scene(scene, second_opinion=False)
+    median = result.checks["median_rel"]["value"]
+    assert result.passed and EXACT_LIMITS["median_rel"] < median < median_limit(scene)
+    from whitted.reference import mutants  # noqa: F401  (declares the catalog's ids)
+
+    with faults.active("spot-uv-centred-at-zero"):
+        bad, _, _ = compare_scene(scene, second_opinion=False)
+    assert not bad.passed and bad.checks["median_rel"]["value"] > 100 * median_limit(scene)

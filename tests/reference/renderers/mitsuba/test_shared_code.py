@@ -168,18 +168,22 @@ def _tracer_model(scene) -> list[np.ndarray]:
 
 def _mitsuba_geometry(mi, scene) -> list[tuple[str, np.ndarray]]:
     """What Mitsuba made of the converted scene: every shape's bounding box, and a mesh's
-    world-space positions and normals."""
+    world-space positions and normals, shape by shape in the order of their boxes (Mitsuba
+    keeps no fixed order of its shapes from one load to the next)."""
     loaded = load(scene, mi, integrator="direct")
-    out = []
+    shapes = []
     for shape in loaded.shapes():
         b = shape.bbox()
-        out.append(("bbox", np.array([list(b.min), list(b.max)], dtype=np.float64)))
+        box = np.array([list(b.min), list(b.max)], dtype=np.float64)
+        parts = [("bbox", box)]
         if shape.is_mesh():
             p = mi.traverse(shape)
             for key in ("vertex_positions", "vertex_normals"):
                 if key in p.keys():
-                    out.append((key, np.asarray(p[key], dtype=np.float64)))
-    return out
+                    parts.append((key, np.asarray(p[key], dtype=np.float64)))
+        shapes.append((tuple(box.ravel()), parts))
+    shapes.sort(key=lambda s: s[0])
+    return [part for _, parts in shapes for part in parts]
 
 
 @pytest.mark.parametrize("bug", PARSE_BUGS)
