@@ -182,16 +182,22 @@ def run(args) -> int:
               "samples alike on both sides)", flush=True)
     outdir = output_folder(args.output or Path("out") / "compare" / scene.name)
     use_backend(args)
-    result, _, _ = compare_scene(scene, outdir, reference,
-                                 progress=Progress(f"render {scene.name}"),
-                                 second_opinion=False if args.no_second_opinion else None,
-                                 seed=args.seed)
+    result, tracer_image, _ = compare_scene(
+        scene, outdir, reference, progress=Progress(f"render {scene.name}"),
+        second_opinion=False if args.no_second_opinion else None, seed=args.seed)
     print(format_comparison(result))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in result.files.values()))
+    original_passed = True
+    if structure is not None and reference == "deterministic":
+        original_passed = _against_original(args, scene, tracer_image, outdir)
     if structure is not None and not structure.agrees:
         print(f"FAIL: the images were rendered from the import, which differs from "
               f"Mitsuba's reading of the original ({len(structure.findings)} structural "
               "difference(s), printed above)")
+        return EXIT_FAIL
+    if not original_passed:
+        print("FAIL: the tracer's image differs from Mitsuba's render of its own reading of "
+              "the original (above)")
         return EXIT_FAIL
     if args.renderer == "all":
         try:
@@ -202,6 +208,39 @@ def run(args) -> int:
             print(f"note: LuxCore (the third renderer's vote): not available: "
                   f"{one_line(str(e), 300)}", file=sys.stderr, flush=True)
     return EXIT_OK if result.passed else EXIT_FAIL
+
+
+def _against_original(args, scene, tracer_image, outdir) -> bool:
+    """For a scene given as Mitsuba XML: the tracer's image judged against the
+    deterministic reference evaluated on Mitsuba's own reading of the original file
+    (:func:`reference.renderers.mitsuba.original.original_reference`), printed, the image
+    written as ``mitsuba_original.exr``; True where it passes or cannot be made (said so)."""
+    from whitted.reference.commands.common import resolve_scene
+    from whitted.reference.renderers.mitsuba.original import original_reference
+    from whitted.reference.verdicts.compare import (
+        at_strata_centres,
+        choose_test,
+        image_metrics,
+        judge,
+    )
+    from whitted.tracer.imageio import write_exr
+
+    judged = at_strata_centres(scene)
+    image, why = original_reference(resolve_scene(args.scene), judged,
+                                    getattr(args, "approximate", False), args.seed)
+    if image is None:
+        print(f"original: not rendered ({why}); the images above judge the import's "
+              "conversion, and the structure its agreement with the original", flush=True)
+        return True
+    test = choose_test(judged)
+    metrics = image_metrics(tracer_image, image, with_flip=False)
+    verdict, _ = judge(test, metrics, tracer_image, image, scene=judged)
+    write_exr(outdir / "mitsuba_original.exr", image)
+    print(f"original: the deterministic reference on Mitsuba's own reading of the original "
+          f"file, test {test}: {'pass' if verdict.passed else 'FAIL'}")
+    print("\n".join(_check_lines(verdict.checks)))
+    print(f"wrote {shown(outdir)}/mitsuba_original.exr", flush=True)
+    return verdict.passed
 
 
 def _structure(args):

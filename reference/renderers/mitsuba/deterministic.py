@@ -126,8 +126,14 @@ class _Light:
     sampler: Callable | None = None
 
 
-def _lights(scene: Scene, ms, mi) -> list[_Light]:
+def _lights(scene: Scene, ms, mi, names: list[str] | None = None) -> list[_Light]:
     """Mitsuba's emitters, each with the tracer's area-light number and its sample map.
+
+    ``names``: for each of ``ms.emitters()``, its name in the conversion (``light_K`` for
+    the scene's K-th light, ``shape_K`` for an emitter on its K-th shape); by default the
+    emitters' and their shapes' own ids, which the conversion sets. A scene Mitsuba read
+    from the original XML has other ids, and its names come from matching it with the
+    conversion (:func:`reference.renderers.mitsuba.original.original_reference`).
 
     Which emitters take a sample comes from Mitsuba's flags: a delta emitter
     (a point, spot or directional light, or Heckbert's light sphere, which is
@@ -143,11 +149,15 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
     sampled = [i for i, light in enumerate(scene.lights)
                if not LIGHTS[type_of(light)].Emitter.delta]
     out = []
-    for e in ms.emitters():
+    for i, e in enumerate(ms.emitters()):
         shape = e.get_shape()
-        if shape is None and e.id().startswith("light_") and not mi.has_flag(
+        if names is not None:
+            name = names[i]
+        else:
+            name = shape.id() if shape is not None else e.id()
+        if shape is None and name.startswith("light_") and not mi.has_flag(
                 e.flags(), mi.EmitterFlags.Delta):
-            k = int(e.id().removeprefix("light_"))
+            k = int(name.removeprefix("light_"))
             sample_map = _light_sample_map(scene.lights[k])
             if sample_map is not None:  # a light at infinity sampled as the tracer does
                 from whitted.reference.emitters import REGISTRY
@@ -158,7 +168,7 @@ def _lights(scene: Scene, ms, mi) -> list[_Light]:
         if shape is None or mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             out.append(_Light(e, None, None))
             continue
-        k = int(shape.id().removeprefix("shape_"))
+        k = int(name.removeprefix("shape_"))
         kind = type(scene.shapes[k])
         if kind not in SAMPLE_MAPS:
             raise NotImplementedError(f"no shared light samples for {kind.__name__} emitters")
@@ -177,18 +187,22 @@ class DeterministicResult:
 class DeterministicReference:
     """Renders one scene with Mitsuba's plugins along the whole Whitted ray tree."""
 
-    def __init__(self, scene: Scene, seed: int = 0, models: bool = False):
+    def __init__(self, scene: Scene, seed: int = 0, models: bool = False, ms=None,
+                 names: list[str] | None = None):
         """``models``: the scene's tracer-only parts as the harness models them (Schlick's
-        dielectric, ``reference/materials/dielectric.py``) instead of Mitsuba's equivalent."""
+        dielectric, ``reference/materials/dielectric.py``) instead of Mitsuba's equivalent.
+        ``ms``: a Mitsuba scene to evaluate instead of the conversion of ``scene`` (the
+        original XML as Mitsuba reads it), with ``names`` for its emitters (:func:`_lights`);
+        the tracer's film positions and light samples stay those of ``scene``."""
         from whitted.reference import mitsuba
         from whitted.reference.renderers.mitsuba.scene import load
 
         self.mi = mi = mitsuba()
         self.scene = scene
         self.seed = seed
-        self.ms = load(scene, mi, models=models)
+        self.ms = load(scene, mi, models=models) if ms is None else ms
         self.sensor = self.ms.sensors()[0]
-        self.lights = _lights(scene, self.ms, mi)
+        self.lights = _lights(scene, self.ms, mi, names)
         self.terms = Terms(mi, self.ms, scene.film.max_depth)
 
     def _level(self, ray, beta, pixel, s, slot, depth: int, L):

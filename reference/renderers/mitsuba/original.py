@@ -505,3 +505,113 @@ def check_and_print(source, approximate: bool = False, **params) -> Structure:
     s = compare_structure(source, approximate=approximate, **params)
     print(s.summary() if s.agrees else "\n".join(s.lines()), flush=True)
     return s
+
+
+# ---------------------------------------------------------------- the original rendered
+
+
+def original_reference(source: str | Path, scene, approximate: bool = False, seed: int = 0,
+                       **params):
+    """The deterministic reference evaluated on Mitsuba's own reading of the original XML.
+
+    :func:`compare_structure` compares what Mitsuba makes of the file with what it makes
+    of the import, object by object; this renders the first. The scene Mitsuba reads
+    from ``source`` (``mi.load_file``, with the ``-D`` values ``params``) is evaluated by
+    :class:`reference.renderers.mitsuba.deterministic.DeterministicReference` at the
+    tracer's film positions and light samples of ``scene`` (the import, as the tracer
+    renders it): nothing of the import reaches Mitsuba but where its samples lie and
+    which of its emitters is which (the original's emitters are matched with the
+    conversion's as the structural comparison matches them: by kind, and by bounding box
+    or parameters). The film is the original's own, so the import's must have its shape.
+
+    Returns ``(image, "")``, or ``(None, why)`` where it cannot be made: parts approximated
+    (``--approximate``), a film of another shape (``--size``), an emitter the tracer's
+    light samples cannot reach, a file Mitsuba cannot load in this variant.
+    """
+    import drjit as dr
+
+    from whitted.reference import mitsuba, mitsuba_error
+    from whitted.reference.renderers.mitsuba.deterministic import (
+        DeterministicReference,
+        shares_light_samples,
+    )
+    from whitted.reference.renderers.mitsuba.scene import load
+
+    if approximate or getattr(scene, "approximate", False):
+        return None, "parts of the import are approximations of the original's"
+    if not shares_light_samples(scene):
+        return None, "an emitter has no shared light samples (the one-lobe reference's case)"
+    mi = mitsuba()
+    threads = dr.thread_count()
+    if threads < 2:   # Mitsuba 3.9.1 never returns from reading an EXR file on one thread
+        dr.set_thread_count(2)
+    try:
+        try:
+            original = mi.load_file(str(source), optimize=False,
+                                    **{k: str(v) for k, v in params.items()})
+        except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
+            return None, f"Mitsuba ({mi.variant()}) cannot load it: {mitsuba_error(e)}"
+        converted = load(scene, mi)
+    finally:
+        if threads < 2:
+            dr.set_thread_count(threads)
+    sensors = original.sensors()
+    if not sensors:
+        return None, "the original has no sensor"
+    film = sensors[0].film()
+    w, h = (int(x) for x in film.size())
+    cw, ch = (int(x) for x in film.crop_size())
+    W, H = scene.film.width, scene.film.height
+    if (cw, ch) != (w, h) or any(int(x) for x in film.crop_offset()):
+        return None, f"the original's film is cropped ({cw}x{ch} of {w}x{h})"
+    if abs(w * H - h * W) > 0:
+        return None, (f"the film is {W}x{H}, the original's {w}x{h}: not the same shape "
+                      "(a --size of the original's aspect keeps it)")
+    names = _emitter_names(mi, original, converted)
+    if isinstance(names, str):
+        return None, names
+    ref = DeterministicReference(scene, seed, ms=original, names=names)
+    return ref.render().image, ""
+
+
+def _emitter_names(mi, original, converted) -> list[str] | str:
+    """For each emitter of ``original``, the name the conversion gives the same emitter
+    (``shape_K`` for one on a shape, ``light_K`` for one of the lights), or why one has
+    none. Delta emitters need no name (they take no light sample)."""
+    shapes = list(converted.shapes())
+
+    def box_distance(o, c) -> float:
+        return float(np.abs(_bbox(o) - _bbox(c)).max())
+
+    lights = [e for e in converted.emitters() if e.get_shape() is None]
+    names = []
+    for e in original.emitters():
+        if mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
+            names.append("")
+            continue
+        shape = e.get_shape()
+        if shape is not None:
+            same = [c for c in shapes if _kind(c) == _kind(shape)]
+            if not same:
+                return f"an emitting {_kind(shape)} of the original has no counterpart"
+            c = min(same, key=lambda c: box_distance(shape, c))
+            names.append(c.id())
+            continue
+        same = [c for c in lights if c.class_name() == e.class_name()]
+        if not same:
+            return f"the original's {e.class_name()} has no counterpart in the import"
+        po = _emitter_params(mi, e)
+
+        def distance(c, po=po) -> float:
+            pc = _emitter_params(mi, c)
+            total = 0.0
+            for k in set(po) | set(pc):
+                a, b = po.get(k), pc.get(k)
+                if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.size == b.size:
+                    total += float(np.abs(a - b).sum())
+                else:
+                    total += 1e30
+            return total
+
+        names.append(min(same, key=distance).id())
+    return names

@@ -268,3 +268,35 @@ def test_real_scenes_that_import_are_all_listed():
     # serialized mesh goes through `whitted import`, not the reader alone.
     assert len(REAL_SCENES) == 24
     assert FAST <= {p.name for p, _ in REAL_SCENES}
+
+
+@pytest.mark.parametrize("bug", ["xml-to-uv-dropped", "xml-steps-reversed"])
+def test_an_importer_bug_fails_against_mitsubas_render_of_the_original(bug, tmp_path, capsys):
+    """The images see an importer bug too: ``compare X.xml`` also judges the tracer's
+    image against the deterministic reference evaluated on Mitsuba's own reading of the
+    original file (original.original_reference), which no import reaches. Clean, the two
+    agree at float precision; with the bug (a dropped to_uv, a to_uv's steps reversed)
+    that verdict fails."""
+    from whitted.reference import mutants  # noqa: F401  (declares the catalog's ids)
+    from whitted.tracer import faults
+
+    args = ["compare", str(TEXTURE_INTERP), "--size", "32x32", "--spp", "4",
+            "--no-second-opinion", "-o"]
+    assert main([*args, str(tmp_path / "clean")]) == 0
+    out = capsys.readouterr().out
+    assert "original: the deterministic reference on Mitsuba's own reading" in out
+    assert "original file, test exact-strata: pass" in out
+    assert (tmp_path / "clean" / "mitsuba_original.exr").is_file()
+    with faults.active(bug):
+        assert main([*args, str(tmp_path / "bug")]) == 1
+    out = capsys.readouterr().out
+    assert "original file, test exact-strata: FAIL" in out
+
+
+def test_a_film_of_another_shape_is_said_not_rendered(tmp_path, capsys):
+    """--size of another aspect than the original's film: the original's own sensor would
+    see another picture, so that verdict is not made, and compare says so."""
+    assert main(["compare", str(TEXTURE_INTERP), "--size", "32x16", "--spp", "1",
+                 "--no-second-opinion", "-o", str(tmp_path / "c")]) == 0
+    out = capsys.readouterr().out
+    assert "original: not rendered (the film is 32x16, the original's 128x128" in out
