@@ -335,6 +335,20 @@ def _emitter_params(mi, e) -> dict:
     return p
 
 
+def _light_distance(mi, o, c) -> float:
+    """How far apart two emitters' parameters are (the sum of their differences; a key on
+    one side only, or of another size, counts as infinitely far): for pairing them."""
+    po, pc = _emitter_params(mi, o), _emitter_params(mi, c)
+    total = 0.0
+    for k in set(po) | set(pc):
+        a, b = po.get(k), pc.get(k)
+        if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.size == b.size:
+            total += float(np.abs(a - b).sum())
+        else:
+            total += 1e30
+    return total
+
+
 def compare_loaded(mi, original, converted, imp, approximate: bool = False) -> Structure:
     """Compare two loaded Mitsuba scenes: ``original`` (``mi.load_file`` of the XML) and
     ``converted`` (the import's conversion); ``imp`` (:class:`tracer.mitsuba_xml.Imported`)
@@ -409,19 +423,9 @@ def compare_loaded(mi, original, converted, imp, approximate: bool = False) -> S
     def lights(scene):
         return [e for e in scene.emitters() if e.class_name() != "AreaLight"]
 
-    def light_distance(o, c) -> float:
-        po, pc = _emitter_params(mi, o), _emitter_params(mi, c)
-        total = 0.0
-        for k in set(po) | set(pc):
-            a, b = po.get(k), pc.get(k)
-            if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.size == b.size:
-                total += float(np.abs(a - b).sum())
-            else:
-                total += 1e30
-        return total
-
     lpairs, lone_o, lone_c = _match(lights(original), lights(converted),
-                                    lambda e: e.class_name(), light_distance)
+                                    lambda e: e.class_name(),
+                                    lambda o, c: _light_distance(mi, o, c))
     for e in lone_o:
         out.append(Finding(f"a {e.class_name()} emitter of the original", "emitter",
                            e.class_name(), "no such emitter"))
@@ -600,18 +604,5 @@ def _emitter_names(mi, original, converted) -> list[str] | str:
         same = [c for c in lights if c.class_name() == e.class_name()]
         if not same:
             return f"the original's {e.class_name()} has no counterpart in the import"
-        po = _emitter_params(mi, e)
-
-        def distance(c, po=po) -> float:
-            pc = _emitter_params(mi, c)
-            total = 0.0
-            for k in set(po) | set(pc):
-                a, b = po.get(k), pc.get(k)
-                if isinstance(a, np.ndarray) and isinstance(b, np.ndarray) and a.size == b.size:
-                    total += float(np.abs(a - b).sum())
-                else:
-                    total += 1e30
-            return total
-
-        names.append(min(same, key=distance).id())
+        names.append(min(same, key=lambda c, e=e: _light_distance(mi, e, c)).id())
     return names
