@@ -264,9 +264,9 @@ def test_stored_real_scene_agrees_with_mitsubas_reading_of_the_original(path, ap
 
 
 def test_real_scenes_that_import_are_all_listed():
-    # STATUS.md: 25 of 44 import (13 as they stand, 12 with --approximate); matpreview's
+    # STATUS.md: 32 of 51 import (14 as they stand, 18 with --approximate); matpreview's
     # serialized mesh goes through `whitted import`, not the reader alone.
-    assert len(REAL_SCENES) == 24
+    assert len(REAL_SCENES) == 31
     assert FAST <= {p.name for p, _ in REAL_SCENES}
 
 
