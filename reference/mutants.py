@@ -211,6 +211,11 @@ CATALOG: tuple[Mutant, ...] = (
        "A textured spot maps its axis to uv (0, 0) instead of the image's centre.",
        "uv = (x, y) / (2 z tan(cutoff))", "uv = 1/2 + (x, y) / (2 z tan(cutoff))",
        L2, "Falloff, spot lights", "tracer/lights.py: spot_uv"),
+    _m("projector-distance-squared",
+       "A projector's image falls off with the squared distance, as a point light's would, "
+       "not with the camera's importance: off its axis the image is too bright.",
+       "E = pi s tex / r^2", "E = pi s tex / (z^2 cos) = pi s tex / (r^2 cos^3)",
+       L1, "Light attenuation", "tracer/emitters/projector.py: Emitter.sample"),
     _m("directional-light-reversed",
        "A directional light's travel direction is used as the direction towards it.",
        "wi = d", "wi = -d (d: the direction the light travels)",
@@ -333,7 +338,7 @@ CATALOG: tuple[Mutant, ...] = (
        "A vertical field of view (fov_axis = \"y\") is made horizontal by dividing by the "
        "aspect ratio instead of multiplying.",
        "tan(fov_x / 2) = tan(fov_y / 2) / aspect", "tan(fov_x / 2) = aspect tan(fov_y / 2)",
-       L1, "Perspective camera construction", "tracer/scene.py: Camera.fov_x"),
+       L1, "Perspective camera construction", "tracer/fov.py: horizontal"),
     _m("camera-y-not-flipped",
        "Image rows counted from the bottom: the picture is upside down.",
        "y_ndc = 2v - 1", "y_ndc = 1 - 2v (row 0 at the top)",
@@ -395,7 +400,7 @@ CATALOG: tuple[Mutant, ...] = (
     _m("xml-fov-axis-ignored",
        "A perspective sensor's fov_axis is dropped, so its fov is always the horizontal one.",
        "fov_x = fov", "fov_x from fov along fov_axis (x, y, diagonal, smaller, larger)",
-       L1, "Perspective camera construction", "tracer/mitsuba_xml.py: _Importer.sensor",
+       L1, "Perspective camera construction", "tracer/mitsuba_xml.py: _Importer.field_of_view",
        stage="import"),
     _m("xml-to-uv-dropped",
        "A bitmap texture's <transform name=\"to_uv\"> is dropped: the image is shown once "

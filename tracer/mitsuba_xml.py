@@ -503,6 +503,7 @@ LIGHTS = {
     "directional": "_directional",
     "constant": "_constant",
     "envmap": "_envmap",
+    "projector": "_projector",
     "whitted_background": "_whitted_background",
 }
 
@@ -825,23 +826,7 @@ class _Importer:
             if k in p:
                 cam[k] = float(self.number(p[k]))
         if kind == "perspective":
-            if "fov" in p and "focal_length" in p:
-                raise XMLImportError(f"{node.where()}: give fov or focal_length, not both")
-            if "fov" in p:
-                cam["fov"] = float(self.number(p["fov"]))
-                ignored = "fov_axis" in p and faults.on("xml-fov-axis-ignored")
-                cam["fov_axis"] = "x" if ignored else self.string(p.get("fov_axis"), "x").lower()
-            else:  # Mitsuba: a 35 mm film's diagonal (36 x 24 mm) at this focal length
-                text = self.string(p.get("focal_length"), "50mm")
-                f = _number(p.get("focal_length") or node, text.lower().removesuffix("mm"),
-                            "focal_length")
-                if f <= 0:
-                    raise XMLImportError(f"{node.where()}: expected a positive focal_length, "
-                                         f"got {_cut(text)}")
-                cam["fov"] = math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * f)))
-                cam["fov_axis"] = "diagonal"
-                self.note("camera", f"focal_length {text}: the diagonal field of view of a "
-                                    "35 mm film (Mitsuba's conversion)")
+            cam.update(self.field_of_view(node, p, "camera"))
             for k in ("principal_point_offset_x", "principal_point_offset_y"):
                 if k in p:
                     cam[k] = float(self.number(p[k]))
@@ -1073,6 +1058,27 @@ class _Importer:
             out["two_sided"] = False
         return out
 
+    def field_of_view(self, node: Node, p: dict, where: str) -> dict:
+        """``fov`` and ``fov_axis`` of a perspective sensor or a projector, as Mitsuba's
+        ``parse_fov`` reads them: ``fov`` along ``fov_axis``, or ``focal_length`` as the
+        diagonal field of view of a 35 mm film (36 x 24 mm)."""
+        if "fov" in p and "focal_length" in p:
+            raise XMLImportError(f"{node.where()}: give fov or focal_length, not both")
+        if "fov" in p:
+            ignored = "fov_axis" in p and faults.on("xml-fov-axis-ignored")
+            return {"fov": float(self.number(p["fov"])),
+                    "fov_axis": "x" if ignored else self.string(p.get("fov_axis"), "x").lower()}
+        text = self.string(p.get("focal_length"), "50mm")
+        f = _number(p.get("focal_length") or node, text.lower().removesuffix("mm"),
+                    "focal_length")
+        if f <= 0:
+            raise XMLImportError(f"{node.where()}: expected a positive focal_length, "
+                                 f"got {_cut(text)}")
+        self.note(where, f"focal_length {text}: the diagonal field of view of a "
+                         "35 mm film (Mitsuba's conversion)")
+        return {"fov": math.degrees(2 * math.atan(math.hypot(36, 24) / (2 * f))),
+                "fov_axis": "diagonal"}
+
     # -------------------------------------------------------------- emitters
 
     def light(self, node: Node) -> None:
@@ -1116,6 +1122,16 @@ class _Importer:
     def _envmap(self, node, p, m, where):
         light = {"type": "envmap",
                  "filename": str(self.res.find(node, self.string(p.get("filename")), "image"))}
+        if "scale" in p:
+            light["scale"] = float(self.number(p["scale"]))
+        if "to_world" in p:
+            light["to_world"] = self.to_world(p["to_world"])
+        return light
+
+    def _projector(self, node, p, m, where):
+        light = {"type": "projector",
+                 "irradiance": self.color(p.get("irradiance"), where, [1.0] * 3),
+                 **self.field_of_view(node, p, where)}
         if "scale" in p:
             light["scale"] = float(self.number(p["scale"]))
         if "to_world" in p:

@@ -37,8 +37,9 @@ from whitted.scenes import resolve as resolve_scene
 # The kinds that used to be defined here are re-exported ("X as X"), so that
 # ``from tracer.scene import Diffuse`` keeps working.
 from whitted.tracer import emitters as _emitters
-from whitted.tracer import faults, settings_schema
+from whitted.tracer import fov as _fov
 from whitted.tracer import materials as _materials
+from whitted.tracer import settings_schema
 from whitted.tracer import shapes as _shapes
 from whitted.tracer import transform as tf
 from whitted.tracer.emitters import area as _area
@@ -153,25 +154,10 @@ class Camera:
         return tf.look_at(self.origin, self.target, self.up)
 
     def fov_x(self, aspect: float) -> float:
-        """The horizontal field of view in degrees for a film of this aspect (width / height).
-
-        Mitsuba's conversion of ``fov`` along ``fov_axis`` (``parse_fov`` in its
-        ``sensor.h``): the image plane at distance 1 spans 2 tan(fov_x / 2) across
-        and 2 tan(fov_x / 2) / aspect down, so a vertical fov_y gives
-        tan(fov_x / 2) = aspect tan(fov_y / 2), and a diagonal one
-        tan(fov_x / 2) = tan(fov_d / 2) / sqrt(1 + 1 / aspect^2).
-        """
-        axis = self.fov_axis
-        if axis == "smaller":
-            axis = "y" if aspect > 1 else "x"
-        elif axis == "larger":
-            axis = "x" if aspect > 1 else "y"
-        t = math.tan(math.radians(self.fov) / 2)
-        if axis == "y":
-            t = t / aspect if faults.on("fov-y-divided") else t * aspect
-        elif axis == "diagonal":
-            t /= math.sqrt(1 + 1 / (aspect * aspect))
-        return math.degrees(2 * math.atan(t))
+        """The horizontal field of view in degrees for a film of this aspect (width / height):
+        ``fov`` along ``fov_axis``, converted as Mitsuba's ``parse_fov`` does
+        (:func:`tracer.fov.horizontal`)."""
+        return _fov.horizontal(self.fov, self.fov_axis, aspect)
 
 
 # Materials and lights: one module per kind (tracer/materials/, tracer/emitters/), found
@@ -309,7 +295,7 @@ EMITTER_SHAPES = _shapes.emitting()
 LIGHT_TYPES = tuple(_emitters.LIGHTS)
 CAMERA_TYPES = ("perspective", "orthographic")
 #: ``fov_axis`` values (Mitsuba's): which extent of the film ``fov`` spans.
-FOV_AXES = ("x", "y", "diagonal", "smaller", "larger")
+FOV_AXES = _fov.FOV_AXES
 #: ``[film] filter`` values: Mitsuba's ``box``, ``gaussian`` and ``tent`` reconstruction filters.
 FILTERS = ("box", "gaussian", "tent")
 TOP_LEVEL = ("description", "film", "camera", "materials", "lights", "shapes", "compare",

@@ -21,6 +21,7 @@ from whitted.reference.emitters import (
     envmap,
     heckbert,
     point,
+    projector,
     spot,
 )
 from whitted.tracer.emitters import type_of
@@ -34,6 +35,7 @@ REGISTRY: dict[str, ModuleType] = {
     "background": background,
     "constant": constant,
     "envmap": envmap,
+    "projector": projector,
     # made by materials of their shapes (tracer.emitters.SHAPE_LIGHTS), attached to the shape
     "heckbert": heckbert,
 }

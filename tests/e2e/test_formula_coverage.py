@@ -58,7 +58,7 @@ SEEDS = 2
 #: camera, the writers of the image files and the Mitsuba XML reader.
 MEASURED = ("shapes/*.py", "materials/*.py", "emitters/*.py", "camera.py", "fresnel.py",
             "phong.py", "lights.py", "texture.py", "sampling.py", "transform.py",
-            "imageio.py", "mitsuba_xml.py", "scene.py")
+            "imageio.py", "mitsuba_xml.py", "scene.py", "fov.py")
 #: Of these files only these functions (qualified names, and what they hold) are measured:
 #: imageio.py's writers and what they call (its readers are the scene loader's and the
 #: tests'), scene.py's one formula, the field of view along ``fov_axis`` (the rest of it is

@@ -25,6 +25,7 @@ from whitted.tracer.emitters import (
     envmap,
     heckbert,
     point,
+    projector,
     spot,
 )
 from whitted.tracer.emitters.base import Emitter, LightModel
@@ -37,6 +38,7 @@ LIGHTS: dict[str, ModuleType] = {
     "background": background,
     "constant": constant,
     "envmap": envmap,
+    "projector": projector,
 }
 
 #: Light kinds made by materials of the shapes carrying them (one line per kind).
