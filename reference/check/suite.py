@@ -95,6 +95,9 @@ FORMULAS: dict[tuple[str, str], list[tuple[str, str]]] = {
     ("light", "envmap"): [("lat-long lookup u = atan2(x, -z) / 2 pi, v = acos(y) / pi",
                            "Textures"),
                           ("uniform sphere directions, pdf 1 / (4 pi)", "Quick radiometry recap")],
+    ("light", "projector"): [("projector: the image at the pinhole projection of the point, "
+                               "E = pi scale irradiance / (z^2 cos)",
+                               "Perspective camera construction")],
     ("light", "background"): [("radiance of rays that miss everything", "Recursion")],
     ("light", "heckbert"): [("Heckbert's light spheres: no falloff, a visibility test",
                              "Whitted's illumination model")],
