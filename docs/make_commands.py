@@ -102,7 +102,7 @@ Fresnel curves, both sides of the boundary: our exact and Schlick against `mi.fr
 and Mitsuba's `dielectric` plugin; `fresnel.csv`, `fresnel.png`, `fresnel.json`.
 """,
     "mutants": """\
-The harness's power check: every bug of the catalog (`reference/mutants.py`, 63
+The harness's power check: every bug of the catalog (`reference/mutants.py`, 64
 plausible bugs in the lectures' formulas, the scene's reading, the XML importer and the
 image writer) switched into the tracer in turn and judged on every scene as `compare`
 judges it, and the importer's on Mitsuba's own reading of XML files; prints per bug the scenes whose verdict fails and by
