@@ -754,7 +754,14 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     import shutil
     import tempfile
 
+    from whitted.reference.verdicts.compare import at_strata_centres
     from whitted.tracer import load_scene
+
+    def read(p):
+        """The scene as compare judges it: at the sweep's size, its samples at the strata
+        centres with the box filter (a scene's jitter or wider filter moves and weighs the
+        same samples alike on both sides, :func:`~reference.verdicts.compare.at_strata_centres`)."""
+        return at_strata_centres(sweep_size(load_scene(p), quick))
 
     start = time.perf_counter()
     mutants = list(CATALOG if mutants is None else mutants)
@@ -764,13 +771,13 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
     scenes = []
     for p in scene_paths:   # validated first; the switches asked while each file is read
         with faults.recording() as asked:
-            scenes.append((p, sweep_size(load_scene(p), quick), frozenset(asked)))
+            scenes.append((p, read(p), frozenset(asked)))
     total = len(scenes) + len(xml_sources)
     workdir = Path(tempfile.mkdtemp(prefix="whitted-sweep-"))
     try:
         jobs = [(scene.name, (scene.film.width, scene.film.height), scene.film.strata ** 2,
                  lambda scene=scene: scene_units(scene, workdir=workdir), read_asked,
-                 lambda p=path: sweep_size(load_scene(p), quick))
+                 lambda p=path: read(p))
                 for path, scene, read_asked in scenes]
         jobs += [(name, (0, 0), 0, lambda n=name, x=xml: [xml_unit(n, x)], frozenset(), None)
                  for name, xml in xml_sources]

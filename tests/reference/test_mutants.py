@@ -204,3 +204,16 @@ def test_report_shows_the_bug_sweep_and_fails_when_a_bug_escapes(tmp_path):
     assert "lambert-no-inv-pi" in caught and "reflect-sign" not in caught
     assert "## Formula bugs: **FAIL**" in (out / "report.md").read_text()
     assert "id='mutants'" in (out / "index.html").read_text()
+
+
+def test_a_scene_with_jitter_and_a_gaussian_filter_is_swept_as_compare_judges_it(tmp_path):
+    """compare judges a scene at its strata centres with the box filter (jitter and a
+    wider filter move and weigh the same samples alike on both sides); the sweep must
+    too, or the tracer as written fails every such scene (a user's, or an import)."""
+    text = (SCENES / "sphere_point.toml").read_text().replace(
+        "[film]", '[film]\njitter = true\nfilter = "gaussian"', 1)
+    (tmp_path / "jittered.toml").write_text(text)
+    result = mutants.sweep([tmp_path / "jittered.toml"], [mutants.BY_ID["lambert-no-inv-pi"]],
+                           log=lambda _: None)
+    assert result.clean_passed, mutants.format_table(result)
+    assert result.all_caught
