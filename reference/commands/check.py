@@ -131,10 +131,29 @@ def run(args) -> int:
         staged.commit()
     print(format_run(judged, title))
     print(f"wrote {shown(outdir)}/" + ", ".join(Path(f).name for f in judged.files.values()))
+    original_passed = True
+    if structure is not None:   # the tracer's reference against the original's own reading
+        from whitted.reference.commands.common import check_lines
+        from whitted.reference.renderers.mitsuba.original import (
+            judge_against_original,
+            original_lines,
+        )
+
+        verdict, _, why = judge_against_original(path, scene, None,
+                                                 getattr(args, "approximate", False),
+                                                 args.seed)
+        print("\n".join(original_lines(verdict, why)))
+        if verdict is not None:
+            print("\n".join(check_lines(verdict.checks)))
+            original_passed = verdict.passed
     if structure is not None and not structure.agrees:
         print(f"FAIL: the reference was rendered from the import, which differs from "
               f"Mitsuba's reading of the original ({len(structure.findings)} structural "
               "difference(s), printed above)")
+        return EXIT_FAIL
+    if not original_passed:
+        print("FAIL: the reference (the tracer's render of the import) differs from Mitsuba's "
+              "render of its own reading of the original (above)")
         return EXIT_FAIL
     return EXIT_OK if judged.passed else EXIT_FAIL
 

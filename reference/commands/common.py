@@ -101,3 +101,34 @@ def film_summary(scene) -> str:
     f = scene.film
     return (f"{f.width}x{f.height}, {f.strata ** 2} spp, max_depth {f.max_depth} "
             f"(DEPTH {f.depth})")
+
+
+_CHECK_LABELS = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
+                 "frac_over_01pct": "pixels beyond 0.1 %",
+                 "mean_rel_diff": "image means differ by",
+                 "z_fraction_passed": "z-test pixels passing",
+                 "block_median_rel": "4x4 blocks: median rel.",
+                 "block_frac_over_5pct": "4x4 blocks beyond 5 %",
+                 "region_max_z": "regions: largest |Z|"}
+_PCT_CHECKS = ("frac_over_5pct", "frac_over_01pct", "z_fraction_passed", "block_frac_over_5pct")
+
+
+def check_lines(checks: dict) -> list[str]:
+    """A verdict's checks as the table compare and check print: value, limit, pass."""
+    lines = [f"  {'check':<26}{'value':>12}  {'limit':>10}"]
+    for k, ch in checks.items():
+        rel = ">=" if k == "z_fraction_passed" else "<"
+        pct = k in _PCT_CHECKS
+        val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
+        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
+        if k == "region_max_z":
+            val, lim = f"{ch['value']:.2f}", f"{ch['limit']:.2f}"
+        lines.append(f"  {_CHECK_LABELS.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
+                     f"{'pass' if ch['pass'] else 'FAIL'}")
+        if k == "region_max_z" and ch.get("regions"):
+            seen = [g for g in ch["regions"] if g["detectable_bias"] <= 0.01]
+            worst = max(ch["regions"], key=lambda g: abs(g["z"]))
+            lines.append(f"    {len(ch['regions'])} regions tested (largest |Z| in "
+                         f"{worst['name']}); a 1 % bias is seen with 90 % power in "
+                         f"{len(seen)} of them")
+    return lines

@@ -8,6 +8,7 @@ from pathlib import Path
 
 from whitted.reference.commands.common import (
     Progress,
+    check_lines,
     load_with_options,
     note_spp,
     output_folder,
@@ -46,41 +47,11 @@ def add_parser(sub) -> None:
     c.set_defaults(func=run)
 
 
-_CHECK_LABELS = {"median_rel": "median rel. difference", "frac_over_5pct": "pixels beyond 5 %",
-                 "frac_over_01pct": "pixels beyond 0.1 %",
-                 "mean_rel_diff": "image means differ by",
-                 "z_fraction_passed": "z-test pixels passing",
-                 "block_median_rel": "4x4 blocks: median rel.",
-                 "block_frac_over_5pct": "4x4 blocks beyond 5 %",
-                 "region_max_z": "regions: largest |Z|"}
-_PCT_CHECKS = ("frac_over_5pct", "frac_over_01pct", "z_fraction_passed", "block_frac_over_5pct")
-
-
-def _check_lines(checks: dict) -> list[str]:
-    lines = [f"  {'check':<26}{'value':>12}  {'limit':>10}"]
-    for k, ch in checks.items():
-        rel = ">=" if k == "z_fraction_passed" else "<"
-        pct = k in _PCT_CHECKS
-        val = f"{100 * ch['value']:.3f} %" if pct else f"{ch['value']:.2e}"
-        lim = f"{100 * ch['limit']:.2f} %" if pct else f"{ch['limit']:.0e}"
-        if k == "region_max_z":
-            val, lim = f"{ch['value']:.2f}", f"{ch['limit']:.2f}"
-        lines.append(f"  {_CHECK_LABELS.get(k, k):<26}{val:>12}  {rel} {lim:>8}  "
-                     f"{'pass' if ch['pass'] else 'FAIL'}")
-        if k == "region_max_z" and ch.get("regions"):
-            seen = [g for g in ch["regions"] if g["detectable_bias"] <= 0.01]
-            worst = max(ch["regions"], key=lambda g: abs(g["z"]))
-            lines.append(f"    {len(ch['regions'])} regions tested (largest |Z| in "
-                         f"{worst['name']}); a 1 % bias is seen with 90 % power in "
-                         f"{len(seen)} of them")
-    return lines
-
-
 def format_comparison(c) -> str:
     m = c.metrics
     lines = [f"scene {c.scene}: {c.size[0]}x{c.size[1]}, {c.spp} spp, backend {c.backend}, "
              f"reference {c.reference} (integrator {c.integrator}), test {c.test}"]
-    lines += _check_lines(c.checks)
+    lines += check_lines(c.checks)
     flip = "n/a" if m["flip"] is None else f"{m['flip']:.4f}"
     lines.append(f"  RMSE {m['rmse']:.3e}   mean rel. {m['mean_rel']:.2e}   "
                  f"99.9th pct. rel. {m['p999_rel']:.2e}   max rel. {m['max_rel']:.2e}   "
@@ -95,13 +66,13 @@ def format_comparison(c) -> str:
                      f"{so['integrator']}, {so['reference_passes']} passes; tracer mean of "
                      f"{so['tracer_seeds']} seeds), test {so['test']}: "
                      f"{'pass' if so['passed'] else 'FAIL'}")
-        lines += _check_lines(so["checks"])
+        lines += check_lines(so["checks"])
     if getattr(c, "tracer_only_model", None):
         tm = c.tracer_only_model
         lines.append(f"tracer-only parts against the harness's model ({', '.join(tm['models'])}"
                      f", reference {tm['reference']}), test {tm['test']}: "
                      f"{'pass' if tm['passed'] else 'FAIL'}")
-        lines += _check_lines(tm["checks"])
+        lines += check_lines(tm["checks"])
     if c.expected_deviation:
         e = c.expected_deviation
         lines.append(f"  expected deviation of the full render (tracer-only: "
@@ -122,7 +93,7 @@ def format_three_way(t) -> str:
                  f"(|Z| {abs(w['z']):.1f})" if w else "")
         src = f" ({p['from']})" if p.get("from") else ""
         lines.append(f"  {name:<16} {'pass' if p['passed'] else 'FAIL'}{src}{where}")
-        lines += ["  " + line for line in _check_lines(
+        lines += ["  " + line for line in check_lines(
             {k: v for k, v in p["checks"].items() if v.get("judged", True)})[1:]]
     return "\n".join(lines)
 
@@ -216,29 +187,21 @@ def _against_original(args, scene, tracer_image, outdir) -> bool:
     (:func:`reference.renderers.mitsuba.original.original_reference`), printed, the image
     written as ``mitsuba_original.exr``; True where it passes or cannot be made (said so)."""
     from whitted.reference.commands.common import resolve_scene
-    from whitted.reference.renderers.mitsuba.original import original_reference
-    from whitted.reference.verdicts.compare import (
-        at_strata_centres,
-        choose_test,
-        image_metrics,
-        judge,
+    from whitted.reference.renderers.mitsuba.original import (
+        judge_against_original,
+        original_lines,
     )
     from whitted.tracer.imageio import write_exr
 
-    judged = at_strata_centres(scene)
-    image, why = original_reference(resolve_scene(args.scene), judged,
-                                    getattr(args, "approximate", False), args.seed)
-    if image is None:
-        print(f"original: not rendered ({why}); the images above judge the import's "
-              "conversion, and the structure its agreement with the original", flush=True)
+    verdict, image, why = judge_against_original(resolve_scene(args.scene), scene,
+                                                 tracer_image,
+                                                 getattr(args, "approximate", False),
+                                                 args.seed)
+    print("\n".join(original_lines(verdict, why)), flush=True)
+    if verdict is None:
         return True
-    test = choose_test(judged)
-    metrics = image_metrics(tracer_image, image, with_flip=False)
-    verdict, _ = judge(test, metrics, tracer_image, image, scene=judged)
     write_exr(outdir / "mitsuba_original.exr", image)
-    print(f"original: the deterministic reference on Mitsuba's own reading of the original "
-          f"file, test {test}: {'pass' if verdict.passed else 'FAIL'}")
-    print("\n".join(_check_lines(verdict.checks)))
+    print("\n".join(check_lines(verdict.checks)))
     print(f"wrote {shown(outdir)}/mitsuba_original.exr", flush=True)
     return verdict.passed
 

@@ -606,3 +606,40 @@ def _emitter_names(mi, original, converted) -> list[str] | str:
             return f"the original's {e.class_name()} has no counterpart in the import"
         names.append(min(same, key=lambda c, e=e: _light_distance(mi, e, c)).id())
     return names
+
+
+def judge_against_original(source: str | Path, scene, tracer_image=None,
+                           approximate: bool = False, seed: int = 0, **params):
+    """The tracer's image of ``scene`` (the import; rendered here at its strata centres
+    when ``tracer_image`` is None) judged against :func:`original_reference`, by the test
+    compare gives the scene. Returns ``(verdict, reference image, "")`` or
+    ``(None, None, why not)``."""
+    from whitted.reference.verdicts.compare import (
+        at_strata_centres,
+        choose_test,
+        image_metrics,
+        judge,
+    )
+
+    judged = at_strata_centres(scene)
+    image, why = original_reference(source, judged, approximate, seed, **params)
+    if image is None:
+        return None, None, why
+    if tracer_image is None:
+        from whitted.tracer.integrator import Integrator
+
+        tracer_image = Integrator(judged, seed=seed).render().image
+    test = choose_test(judged)
+    metrics = image_metrics(tracer_image, image, with_flip=False)
+    verdict, _ = judge(test, metrics, tracer_image, image, scene=judged)
+    return verdict, image, ""
+
+
+def original_lines(verdict, why: str) -> list[str]:
+    """What ``compare`` and ``check`` print of :func:`judge_against_original` (the check
+    lines come from the caller, which formats them as its own)."""
+    if verdict is None:
+        return [f"original: not rendered ({why}); the images judge the import's conversion, "
+                "and the structure its agreement with the original"]
+    return [f"original: the deterministic reference on Mitsuba's own reading of the original "
+            f"file, test {verdict.test}: {'pass' if verdict.passed else 'FAIL'}"]
