@@ -35,9 +35,14 @@ Parts that the import *approximated* (``--approximate``: a rough BSDF made smoot
 spectrum averaged) are not compared: Mitsuba's reading of them differs by design.
 They are listed in :attr:`Structure.approximated`.
 
-Not judged here: the images. Rendering the original with Mitsuba and comparing it
-with the tracer's render of the import is the report's "imported" group
-(:func:`reference.renderers.mitsuba.importer.validate_case`).
+The images: :func:`original_reference` evaluates the deterministic reference on
+Mitsuba's own reading of the original (at the tracer's sample positions) and
+:func:`judge_against_original` judges the tracer's render of the import against it,
+for ``compare`` and ``check`` of a scene given as XML; where the deterministic
+reference cannot take the tracer's light samples, ``compare`` falls back on Mitsuba's
+own render of the original at max_depth 2
+(:func:`reference.renderers.mitsuba.importer.validate_case`, the report's "imported"
+group).
 """
 
 from __future__ import annotations
