@@ -149,7 +149,12 @@ class Block(base.Block):
                                    dr.gather(jit.Array2f, self.vt, i2, mask))
         else:
             uv = jit.Array2f(beta, gamma)
-        return dr.fma(d, t, o), n, ns, uv
+        # The point from the barycentrics, on the triangle as Mitsuba places it
+        # (fmadd(p1, b1, fmadd(p2, b2, p0 b0)), src/render/mesh.cpp), rather than o + t d,
+        # which may lie a rounding past the triangle's edge (behind a neighbour at a seam).
+        alpha = 1.0 - beta - gamma
+        p = dr.fma(p1, beta, dr.fma(p2, gamma, p0 * alpha))
+        return p, n, ns, uv
 
 
 class Sampler(base.FlatSampler):
