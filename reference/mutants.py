@@ -83,9 +83,9 @@ class Mutant:
 
     @property
     def seen_by(self) -> str:
-        """Which verdicts can see the bug, in words."""
-        return {"import": "structure", "output": "image file"}.get(
-            self.stage, "onelobe only" if self.shared else "both")
+        """Which verdicts can see the bug (:attr:`references`), in words."""
+        return {("structure",): "structure", ("files",): "image file",
+                ("onelobe",): "onelobe only"}.get(self.references, "both")
 
     @property
     def references(self) -> tuple[str, ...]:

@@ -376,11 +376,6 @@ STEPS = ("translate", "scale", "rotate", "matrix")
 Step = tuple
 
 
-def parse_steps(t: Table, key: str) -> np.ndarray:
-    """The composed matrix of a ``to_world`` (see :func:`read_steps`)."""
-    return read_steps(t, key)[0]
-
-
 def read_steps(t: Table, key: str) -> tuple[np.ndarray, tuple[Step, ...]]:
     """A ``to_world`` value: its steps as read (:data:`Step`) and the tracer's composition
     of them (:func:`tracer.transform.compose`), checked."""
@@ -469,5 +464,5 @@ def read_local_points(t: Table, key: str, m: np.ndarray,
 __all__ = ["COND_MAX", "COORD_MAX", "FLOAT32_MAX", "FLOAT32_TINY", "STEPS", "VEC3_SCHEMA",
            "Color", "Matrix", "Table", "Vec3", "as_tuple", "check_distinct", "check_extent",
            "check_number", "check_transform", "check_unit", "check_vec3", "norm", "norm_or_1",
-           "number_schema", "parse_step", "parse_steps", "range_text", "read_local_points",
+           "number_schema", "parse_step", "range_text", "read_local_points",
            "read_points", "read_steps", "show", "Step"]

@@ -187,18 +187,18 @@ def _against_original(args, scene, tracer_image, outdir) -> bool:
     (:func:`reference.renderers.mitsuba.original.original_reference`), printed, the image
     written as ``mitsuba_original.exr``; True where it passes or cannot be made (said so)."""
     from whitted.reference.commands.common import resolve_scene
+    from whitted.reference.renderers.mitsuba.deterministic import shares_light_samples
     from whitted.reference.renderers.mitsuba.original import (
         judge_against_original,
         original_lines,
     )
     from whitted.tracer.imageio import write_exr
 
-    verdict, image, why = judge_against_original(resolve_scene(args.scene), scene,
-                                                 tracer_image,
-                                                 getattr(args, "approximate", False),
-                                                 args.seed)
-    if verdict is None and "no shared light samples" in why and args.size is None:
+    approximate = getattr(args, "approximate", False) or scene.approximate
+    if not approximate and not shares_light_samples(scene) and args.size is None:
         return _against_original_render(args, scene)
+    verdict, image, why = judge_against_original(resolve_scene(args.scene), scene,
+                                                 tracer_image, approximate, args.seed)
     print("\n".join(original_lines(verdict, why)), flush=True)
     if verdict is None:
         return True

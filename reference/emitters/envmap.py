@@ -20,8 +20,7 @@ def mitsuba(light: EnvMap) -> dict:
     return {"type": "envmap", "filename": ("string", light.filename),
             "scale": ("float", light.scale),
             # the file's own steps, composed by Mitsuba (made in code: the matrix)
-            "to_world": transforms.tree(transforms.matrix_step(light.to_world)
-                                        if light.steps is None else light.steps)}
+            "to_world": transforms.tree(transforms.of(light))}
 
 
 def sample_map(u, mi):

@@ -15,7 +15,7 @@ from whitted.tracer.emitters.projector import Projector
 
 
 def mitsuba(light: Projector) -> dict:
-    steps = transforms.matrix_step(light.to_world) if light.steps is None else light.steps
     return {"type": "projector", "irradiance": texture_tree(light.irradiance),
             "scale": ("float", light.scale), "fov": ("float", light.fov),
-            "fov_axis": ("string", light.fov_axis), "to_world": transforms.tree(steps)}
+            "fov_axis": ("string", light.fov_axis),
+            "to_world": transforms.tree(transforms.of(light))}

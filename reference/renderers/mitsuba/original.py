@@ -340,6 +340,11 @@ def _emitter_params(mi, e) -> dict:
     return p
 
 
+def _box_distance(o, c) -> float:
+    """How far apart two shapes' bounding boxes are (their largest corner difference)."""
+    return float(np.abs(_bbox(o) - _bbox(c)).max())
+
+
 def _light_distance(mi, o, c) -> float:
     """How far apart two emitters' parameters are (the sum of their differences; a key on
     one side only, or of another size, counts as infinitely far): for pairing them."""
@@ -374,11 +379,8 @@ def compare_loaded(mi, original, converted, imp, approximate: bool = False) -> S
         w = shape_where(c)
         return imp.origins.get(w, w or "a shape") if w else "a shape"
 
-    def box_distance(o, c) -> float:
-        return float(np.abs(_bbox(o) - _bbox(c)).max())
-
     pairs, lone_o, lone_c = _match(list(original.shapes()), list(converted.shapes()), _kind,
-                                   box_distance)
+                                   _box_distance)
     for o in lone_o:
         out.append(Finding(f"a {_kind(o)} shape of the original", "shape",
                            f"{_kind(o)} at {_show(_bbox(o).reshape(2, 3))}", "no such shape"))
@@ -465,7 +467,7 @@ def compare_structure(source: str | Path, scene=None, imported=None,
     >>> s.agrees, s.summary()   # doctest: +SKIP
     """
     from whitted.reference import mitsuba, mitsuba_error
-    from whitted.reference.renderers.mitsuba.scene import scene_tree, to_dict
+    from whitted.reference.renderers.mitsuba.scene import loading_threads, scene_tree, to_dict
 
     if imported is None or scene is None:
         from whitted.tracer.mitsuba_xml import read_xml
@@ -473,28 +475,29 @@ def compare_structure(source: str | Path, scene=None, imported=None,
 
         imported = read_xml(source, approximate, **params)
         scene = parse_scene(imported.data, str(source))
-    import drjit as dr
-
     mi = mitsuba()
-    # optimize=False: Mitsuba would merge the meshes that share a BSDF, on each side alike
-    # or not (an approximated BSDF may make two alike), and the shapes could not be matched.
-    threads = dr.thread_count()
-    if threads < 2:   # Mitsuba 3.9.1 never returns from reading an EXR file on one thread
-        dr.set_thread_count(2)   # (reference.renderers.mitsuba.scene.load says so too)
     try:
-        try:
-            original = mi.load_file(str(source), optimize=False,
-                                    **{k: str(v) for k, v in params.items()})
-        except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
-            # e.g. cbox_pol.xml's `stokes` integrator, which only a polarized variant
-            # loads (the import approximated it): nothing to compare, and said so
-            return Structure(unchecked=f"Mitsuba ({mi.variant()}) cannot load it: "
-                                       f"{mitsuba_error(e)}")
+        original = _load_original(mi, source, params)
+    except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
+        # e.g. cbox_pol.xml's `stokes` integrator, which only a polarized variant
+        # loads (the import approximated it): nothing to compare, and said so
+        return Structure(unchecked=f"Mitsuba ({mi.variant()}) cannot load it: "
+                                   f"{mitsuba_error(e)}")
+    with loading_threads():   # optimize=False, as _load_original says
         converted = mi.load_dict(to_dict(scene_tree(scene, "direct"), mi), optimize=False)
-    finally:
-        if threads < 2:
-            dr.set_thread_count(threads)
     return compare_loaded(mi, original, converted, imported, approximate)
+
+
+def _load_original(mi, source, params: dict):
+    """Mitsuba's reading of the original XML, with the ``-D`` values ``params``.
+    optimize=False: Mitsuba would merge the meshes that share a BSDF, on each side alike
+    or not (an approximated BSDF may make two alike), and the shapes could not be matched.
+    Mitsuba's own errors (RuntimeError, ValueError) are the caller's to word."""
+    from whitted.reference.renderers.mitsuba.scene import loading_threads
+
+    with loading_threads():
+        return mi.load_file(str(source), optimize=False,
+                            **{k: str(v) for k, v in params.items()})
 
 
 def findings(source: str | Path, approximate: bool = False, **params) -> list[Finding]:
@@ -537,8 +540,6 @@ def original_reference(source: str | Path, scene, approximate: bool = False, see
     (``--approximate``), a film of another shape (``--size``), an emitter the tracer's
     light samples cannot reach, a file Mitsuba cannot load in this variant.
     """
-    import drjit as dr
-
     from whitted.reference import mitsuba, mitsuba_error
     from whitted.reference.renderers.mitsuba.deterministic import (
         DeterministicReference,
@@ -551,19 +552,10 @@ def original_reference(source: str | Path, scene, approximate: bool = False, see
     if not shares_light_samples(scene):
         return None, "an emitter has no shared light samples (the one-lobe reference's case)"
     mi = mitsuba()
-    threads = dr.thread_count()
-    if threads < 2:   # Mitsuba 3.9.1 never returns from reading an EXR file on one thread
-        dr.set_thread_count(2)
     try:
-        try:
-            original = mi.load_file(str(source), optimize=False,
-                                    **{k: str(v) for k, v in params.items()})
-        except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
-            return None, f"Mitsuba ({mi.variant()}) cannot load it: {mitsuba_error(e)}"
-        converted = load(scene, mi)
-    finally:
-        if threads < 2:
-            dr.set_thread_count(threads)
+        original = _load_original(mi, source, params)
+    except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
+        return None, f"Mitsuba ({mi.variant()}) cannot load it: {mitsuba_error(e)}"
     sensors = original.sensors()
     if not sensors:
         return None, "the original has no sensor"
@@ -576,34 +568,34 @@ def original_reference(source: str | Path, scene, approximate: bool = False, see
     if abs(w * H - h * W) > 0:
         return None, (f"the film is {W}x{H}, the original's {w}x{h}: not the same shape "
                       "(a --size of the original's aspect keeps it)")
-    names = _emitter_names(mi, original, converted)
+    names = _emitter_names(mi, original, lambda: load(scene, mi))
     if isinstance(names, str):
         return None, names
     ref = DeterministicReference(scene, seed, ms=original, names=names)
     return ref.render().image, ""
 
 
-def _emitter_names(mi, original, converted) -> list[str] | str:
-    """For each emitter of ``original``, the name the conversion gives the same emitter
-    (``shape_K`` for one on a shape, ``light_K`` for one of the lights), or why one has
-    none. Delta emitters need no name (they take no light sample)."""
-    shapes = list(converted.shapes())
-
-    def box_distance(o, c) -> float:
-        return float(np.abs(_bbox(o) - _bbox(c)).max())
-
-    lights = [e for e in converted.emitters() if e.get_shape() is None]
+def _emitter_names(mi, original, convert) -> list[str] | str:
+    """For each emitter of ``original``, the name the conversion (``convert()``, loaded
+    only where an emitter needs a name) gives the same emitter (``shape_K`` for one on a
+    shape, ``light_K`` for one of the lights), or why one has none. Delta emitters need
+    no name (they take no light sample)."""
+    converted = None
     names = []
     for e in original.emitters():
         if mi.has_flag(e.flags(), mi.EmitterFlags.Delta):
             names.append("")
             continue
+        if converted is None:
+            converted = convert()
+            shapes = list(converted.shapes())
+            lights = [c for c in converted.emitters() if c.get_shape() is None]
         shape = e.get_shape()
         if shape is not None:
             same = [c for c in shapes if _kind(c) == _kind(shape)]
             if not same:
                 return f"an emitting {_kind(shape)} of the original has no counterpart"
-            c = min(same, key=lambda c: box_distance(shape, c))
+            c = min(same, key=lambda c: _box_distance(shape, c))
             names.append(c.id())
             continue
         same = [c for c in lights if c.class_name() == e.class_name()]

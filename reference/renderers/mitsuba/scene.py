@@ -45,6 +45,7 @@ integrator are converted here.
 
 from __future__ import annotations
 
+from contextlib import contextmanager
 from pathlib import Path
 from xml.sax.saxutils import quoteattr
 
@@ -210,9 +211,7 @@ def to_dict(tree: dict, mi) -> dict:
             out[k] = to_dict(v, mi)
         elif isinstance(v, tuple) and len(v) == 2 and isinstance(v[0], str):
             kind, val = v
-            if kind == "matrix":
-                out[k] = mi.ScalarTransform4f(np.asarray(val, dtype=np.float64).tolist())
-            elif kind == "steps":
+            if kind == "steps":
                 out[k] = transforms.compose(mi, val)
             elif kind == "uvscale":
                 out[k] = mi.ScalarTransform3f().scale(mi.ScalarPoint2f(*val))
@@ -236,19 +235,26 @@ def load(scene: Scene, mi, integrator: str = "whitted", moments: bool = False,
     ``models``: tracer-only parts as the harness models them, where it has a model
     (:func:`reference.materials.tracer_only_model`)."""
     tree = to_dict(scene_tree(scene, integrator, moments, jitter, models), mi)
+    with loading_threads():
+        return mi.load_dict(tree)
+
+
+@contextmanager
+def loading_threads():
+    """At least two Dr.Jit threads while Mitsuba loads a scene: Mitsuba 3.9.1's parser
+    never returns from reading an EXR file (scenes/envmap.toml's map) on a pool of one
+    thread, which renderers.luxcore.render.SharedCores leaves during the report's sweep
+    (and a one-core machine by default). The pool is restored after."""
     import drjit as dr
 
     threads = dr.thread_count()
-    if threads >= 2:
-        return mi.load_dict(tree)
-    # Mitsuba 3.9.1's parser never returns from reading an EXR file (scenes/envmap.toml's
-    # map) on a Dr.Jit pool of one thread, which renderers.luxcore.render.SharedCores leaves
-    # during the report's sweep (and a one-core machine by default): two for the load.
-    dr.set_thread_count(2)
+    if threads < 2:
+        dr.set_thread_count(2)
     try:
-        return mi.load_dict(tree)
+        yield
     finally:
-        dr.set_thread_count(threads)
+        if threads < 2:
+            dr.set_thread_count(threads)
 
 
 # ------------------------------------------------------------------ XML
@@ -305,10 +311,6 @@ def _xml(tree: dict, tag: str, indent: int, meshes: list, obj_id: str | None = N
         if kind == "steps":
             if val:
                 lines += transforms.xml_lines(k, val, pad + "    ", _fmt)
-        elif kind == "matrix":
-            flat = " ".join(_fmt(x) for row in val for x in row)
-            lines += [f'{pad}    <transform name="{k}">', f'{pad}        <matrix value="{flat}"/>',
-                      f"{pad}    </transform>"]
         elif kind == "uvscale":
             lines += [f'{pad}    <transform name="{k}">',
                       f'{pad}        <scale x="{_fmt(val[0])}" y="{_fmt(val[1])}"/>',

@@ -7,7 +7,7 @@ transpose, a sphere's radius that ignores the scale) would otherwise move both i
 alike. So the conversion hands Mitsuba the *steps* as the file wrote them (the reader's
 :data:`tracer.settings.Step` tuples, kept on each model: a shape's
 :class:`tracer.shapes.base.Placement`, the camera's and an environment map's
-``steps``), and Mitsuba composes them: ``mi.ScalarTransform4f``'s ``translate``,
+``steps``), and Mitsuba composes them: ``mi.ScalarTransform4d``'s ``translate``,
 ``scale``, ``rotate``, ``look_at`` and a ``matrix`` step, first step first (the XML
 writer puts the same steps into a ``<transform>``, which Mitsuba's parser composes
 alike). Points and normals of in-memory meshes are moved by ``mi.Transform4f``
@@ -35,13 +35,15 @@ Step = tuple
 Steps = tuple
 
 
-def of(shape) -> Steps:
-    """A shape's ``to_world`` as steps: its :class:`~tracer.shapes.base.Placement`'s, or,
-    for a shape made in code (no placement), its composed matrix as one step."""
-    placement = getattr(shape, "placement", None)
-    if placement is not None:
-        return tuple(placement.steps)
-    return matrix_step(shape.to_world)
+def of(model) -> Steps:
+    """A shape's or a light's ``to_world`` as steps: a shape's
+    :class:`~tracer.shapes.base.Placement`'s, a light's ``steps``, or, for a model made in
+    code (neither), its composed matrix as one step."""
+    placement = getattr(model, "placement", None)
+    steps = placement.steps if placement is not None else getattr(model, "steps", None)
+    if steps is not None:
+        return tuple(steps)
+    return matrix_step(model.to_world)
 
 
 def matrix_step(m) -> Steps:
@@ -127,8 +129,6 @@ def move_points(mi, steps: Steps, points: np.ndarray) -> np.ndarray:
     """N x 3 points moved by Mitsuba's composition of ``steps`` (float32, as Mitsuba holds
     them), as a float64 array."""
     p = np.asarray(points, dtype=np.float32)
-    if not steps:
-        return p.astype(np.float64)
     T = mi.Transform4f(compose(mi, steps))
     q = T @ mi.Point3f(mi.Float(p[:, 0]), mi.Float(p[:, 1]), mi.Float(p[:, 2]))
     return np.asarray(q, dtype=np.float64).T   # Dr.Jit gives 3 x N

@@ -3,7 +3,8 @@
 A plugin is ``{"type": ..., key: value | nested plugin}``. Values are tagged
 tuples so that one tree serves both ``mi.load_dict`` and the XML writer
 (:mod:`reference.renderers.mitsuba.scene`): ``("rgb", (r, g, b))``, ``("point", (x, y, z))``,
-``("vector", ...)``, ``("matrix", 4x4)``, ``("uvscale", (su, sv))``, ``("uvmatrix", 3x3)``,
+``("vector", ...)``, ``("steps", to_world steps)`` (composed by Mitsuba:
+:mod:`reference.renderers.mitsuba.transforms`), ``("uvscale", (su, sv))``, ``("uvmatrix", 3x3)``,
 ``("float", x)``, ``("integer", n)``, ``("boolean", b)``, ``("string", s)``.
 The conversions of the material and emitter kinds (``reference/materials/``,
 ``reference/emitters/``) build their trees with these helpers.
@@ -17,11 +18,6 @@ import numpy as np
 def rgb(c) -> dict:
     """An ``rgb`` texture of a colour."""
     return {"type": "rgb", "value": ("rgb", tuple(float(x) for x in c))}
-
-
-def matrix(m) -> tuple:
-    """A 4x4 transform."""
-    return ("matrix", tuple(tuple(float(x) for x in row) for row in np.asarray(m)))
 
 
 def any_up(axis) -> np.ndarray:
