@@ -16,6 +16,8 @@ import importlib
 import os
 from types import ModuleType
 
+import numpy as np
+
 from whitted.tracer import llvm
 
 BACKENDS = ("auto", "llvm", "cuda")
@@ -89,6 +91,24 @@ def use(name: str | None = None) -> str:
 def name() -> str:
     """The selected backend, selecting the default one if none was chosen yet."""
     return use() if _name is None else _name
+
+
+def new_scope() -> None:
+    """Start a new basic block of Dr.Jit's tracing (``drjit.detail.new_scope``): values
+    traced from here on are not merged by value numbering with those made before."""
+    import drjit as dr
+
+    dr.detail.new_scope(dr.JitBackend.CUDA if name() == "cuda" else dr.JitBackend.LLVM)
+
+
+def host3(v) -> np.ndarray:
+    """(n, 3) numpy copy of an Array3f, a component at a time: ``v.numpy()`` of a
+    3-vector runs a kernel with the width written into it, compiled anew for each
+    width (a BVH level, a render's last chunk)."""
+    import drjit as dr
+
+    dr.eval(v)
+    return np.stack([v.x.numpy(), v.y.numpy(), v.z.numpy()], axis=1)
 
 
 def mitsuba_variant() -> str:

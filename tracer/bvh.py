@@ -315,6 +315,10 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
     chunk = _chunk()
     levels = []
     while True:
+        # A basic block a level: value numbering then never merges a level's constants
+        # with values alive from the levels before, which made the kernels of every level
+        # differ and be compiled anew (bench_speed.py process, a cold kernel cache).
+        backend.new_scope()
         cnt = upload(U, h_cnt, np.uint32)
         h_first = np.cumsum(h_cnt) - h_cnt
         first = upload(U, h_first, np.uint32)
@@ -351,7 +355,7 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         h_start = placed + np.cumsum(np.where(h_leaf, h_cnt, 0)) - np.where(h_leaf, h_cnt, 0)
         left = np.where(h_leaf, -1, base + S + 2 * h_rank)
         levels.append(dict(node=base + np.arange(S), left=left,
-                           lo=box_lo.numpy().T, hi=box_hi.numpy().T,
+                           lo=backend.host3(box_lo), hi=backend.host3(box_hi),
                            right=np.where(h_leaf, -1, left + 1),
                            start=np.where(h_leaf, h_start, 0),
                            count=np.where(h_leaf, h_cnt, 0)))
@@ -738,6 +742,8 @@ class BVH:
     Parameters
     ----------
     p0, p1, p2 : (N, 3) world-space triangle corners (float64 or anything numpy reads).
+    arrays : a tree already built over these triangles (:func:`shared_bvh` reads one
+        from its disk cache), else one is built.
     **build_options : passed to :func:`build_bvh`.
 
     Attributes
@@ -753,9 +759,10 @@ class BVH:
         p0 (3), p1 (3), p2 (3), unused (7).
     """
 
-    def __init__(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, **build_options):
+    def __init__(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *,
+                 arrays: BVHArrays | None = None, **build_options):
         p0, p1, p2 = (np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in (p0, p1, p2))
-        self.arrays = build_bvh(p0, p1, p2, **build_options)
+        self.arrays = arrays if arrays is not None else build_bvh(p0, p1, p2, **build_options)
         self.build_seconds = self.arrays.seconds
         self.node_count = len(self.arrays.left)
         self.triangle_count = len(p0)
@@ -1040,11 +1047,13 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
     A BVH is never changed after its build, so the tree is shared as it is. Kept: the
     last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by the bytes of
     the corners and the backend. Its ``build_seconds`` stay those of its build.
+    Trees of :data:`DISK_MIN_TRIANGLES` triangles or more are also kept on disk
+    (:func:`_kept_on_disk`), for the next process.
     """
     p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
                   for p in (p0, p1, p2))
     if len(p0) > RECENT_MAX_TRIANGLES:
-        return BVH(p0, p1, p2)
+        return _kept_on_disk(p0, p1, p2)
     h = hashlib.blake2b(backend.name().encode(), digest_size=20)
     for p in (p0, p1, p2):
         h.update(p.tobytes())
@@ -1052,7 +1061,125 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
     if key in _RECENT:
         _RECENT.move_to_end(key)
         return _RECENT[key]
-    bvh = _RECENT[key] = BVH(p0, p1, p2)
+    bvh = _RECENT[key] = _kept_on_disk(p0, p1, p2)
     while len(_RECENT) > RECENT_COUNT:
         _RECENT.popitem(last=False)
     return bvh
+
+
+# ------------------------------------------------------------------ the cache on disk
+
+#: Meshes of at least this many triangles keep their tree on disk, in
+#: ``$XDG_CACHE_HOME/whitted/bvh`` (smaller ones build in milliseconds).
+DISK_MIN_TRIANGLES = 1 << 15
+#: The disk cache's bound, all trees together; the least recently used go first.
+DISK_MAX_BYTES = 2 << 30
+_SOURCE_DIGEST: str | None = None
+_ARRAY_KINDS = {"lo": "<f4", "hi": "<f4", "left": "<i8", "right": "<i8", "start": "<i8",
+                "count": "<i8", "order": "<i8", "depth": "<i8"}
+
+
+def disk_folder():
+    """``$XDG_CACHE_HOME/whitted/bvh``: trees of large meshes (:mod:`tracer.cache`'s rules)."""
+    from whitted.tracer import cache
+
+    return cache.home() / "bvh"
+
+
+def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
+    """``BVH(p0, p1, p2)``, its tree read from the disk cache when one was kept for the
+    same corners by the same builder (a SHA-256 of the corners' bytes and of this
+    module's source) and it passes :func:`valid_arrays`; else built, and kept."""
+    from pathlib import Path
+
+    from whitted.tracer import cache
+
+    if len(p0) < DISK_MIN_TRIANGLES:
+        return BVH(p0, p1, p2)
+    global _SOURCE_DIGEST
+    if _SOURCE_DIGEST is None:
+        _SOURCE_DIGEST = cache.content_key(Path(__file__).read_bytes())
+    folder = disk_folder()
+    entry = folder / f"{cache.content_key(_SOURCE_DIGEST, p0, p1, p2)}.arrays"
+    if cache.folder(folder, create=False) is not None:
+        t0 = time.perf_counter()
+        a = cache.read_arrays(entry, _ARRAY_KINDS)
+        if a is not None and a["depth"].shape == (1,):
+            arrays = BVHArrays(a["lo"], a["hi"], a["left"], a["right"], a["start"],
+                               a["count"], a["order"], int(a["depth"][0]),
+                               time.perf_counter() - t0)
+            if valid_arrays(arrays, p0, p1, p2):
+                cache.touch(entry)
+                return BVH(p0, p1, p2, arrays=arrays)
+    bvh = BVH(p0, p1, p2)
+    b = bvh.arrays
+    if cache.folder(folder) is not None and cache.write_bytes(entry, cache.pack_arrays(
+            {"lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right, "start": b.start,
+             "count": b.count, "order": b.order, "depth": np.array([b.depth])})):
+        cache.prune(folder, DISK_MAX_BYTES, keep=entry)
+    return bvh
+
+
+def valid_arrays(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
+                 max_leaf: int = (1 << COUNT_BITS) - 1) -> bool:
+    """Whether ``b`` is a tree over these triangles that the traversal may walk: what a
+    tree read from disk must show before it is used.
+
+    Shapes agree; node 0 is the root and every other node is the child of exactly one
+    inner node that comes before it (a tree, depth-first, so a walk ends); a leaf holds
+    1 to ``max_leaf`` triangles and the leaves' ranges tile ``order``, a permutation of
+    the triangles; ``depth`` is the tree's; every box is finite and holds its children's
+    boxes, a leaf's box its triangles' corners (so that no hit is missed).
+    """
+    n, m = len(p0), len(b.left)
+    shapes = [(b.lo, (m, 3)), (b.hi, (m, 3)), (b.right, (m,)), (b.start, (m,)),
+              (b.count, (m,)), (b.order, (n,))]
+    if n == 0 or m == 0 or any(a.shape != s for a, s in shapes) or b.depth < 0:
+        return False
+    if not (np.isfinite(b.lo).all() and np.isfinite(b.hi).all()):
+        return False
+    inner = b.left >= 0
+    leaf = ~inner
+    idx = np.arange(m)
+    li, ri = b.left[inner], b.right[inner]
+    if (li <= idx[inner]).any() or (ri <= idx[inner]).any() or (li >= m).any() \
+            or (ri >= m).any() or (b.right[leaf] != -1).any() or (b.left[leaf] != -1).any():
+        return False
+    parents = np.bincount(np.concatenate([li, ri]), minlength=m)
+    if parents[0] != 0 or (parents[1:] != 1).any():
+        return False
+    cnt, start = b.count[leaf], b.start[leaf]
+    if (b.count[inner] != 0).any() or (cnt < 1).any() or (cnt > max_leaf).any():
+        return False
+    if (start < 0).any() or (start + cnt > n).any():
+        return False
+    by_start = np.argsort(start, kind="stable")
+    ends = np.cumsum(cnt[by_start])
+    if ends[-1] != n or (start[by_start] != ends - cnt[by_start]).any():
+        return False
+    o = b.order
+    if o.min() < 0 or o.max() >= n or (np.bincount(o, minlength=n) != 1).any():
+        return False
+    # depth: the deepest leaf's level, found level by level from the root (each node is
+    # met once, as the child of its one parent)
+    frontier, levels = np.zeros(1, np.int64), -1
+    while len(frontier):
+        levels += 1
+        if levels > b.depth:
+            return False
+        frontier = frontier[inner[frontier]]
+        frontier = np.concatenate([b.left[frontier], b.right[frontier]])
+    if levels != b.depth:
+        return False
+    # boxes: children inside parents, triangles inside leaves
+    for k in (li, ri):
+        if (b.lo[k] < b.lo[inner]).any() or (b.hi[k] > b.hi[inner]).any():
+            return False
+    owner = np.empty(n, np.int64)   # the leaf of each triangle, in the caller's order
+    owner[o] = np.repeat(np.flatnonzero(leaf)[by_start], cnt[by_start])
+    for box, pick, wrong in ((b.lo, np.minimum, np.greater), (b.hi, np.maximum, np.less)):
+        corner = pick(p0, p1)
+        pick(corner, p2, out=corner)
+        if wrong(box[owner], corner).any():
+            return False
+    return True

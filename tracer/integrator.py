@@ -924,6 +924,12 @@ class Integrator:
         counts: list = []  # _render_stack's sums, read at the end
         start = time.perf_counter()
         for first in range(0, total, per_chunk):
+            # Each chunk is traced in a basic block of its own, so that Dr.Jit's value
+            # numbering never merges its constants with those already alive (a light's
+            # position, made when the Integrator was), which it did in the first chunk
+            # only: the first chunk's kernel then differed from the others' and was
+            # compiled apart, about 0.3 s on a cold kernel cache (bench_speed.py process).
+            backend.new_scope()
             count = min(per_chunk, total - first)
             lanes = count * spp * (1 if shared else S)
 
@@ -965,7 +971,7 @@ class Integrator:
                     dr.eval(means)
                     view = out[rows].reshape(-1, len(means), 3)
                     for k, m in enumerate(means):
-                        view[:, k] = m.numpy().T
+                        view[:, k] = backend.host3(m)
                     del means
                 del seed_sums
             # The chunk's buffer is freed before the next chunk allocates its own, which

@@ -56,7 +56,12 @@ Parsed meshes are kept in a small cache (:data:`CACHE_MAX_MESHES` meshes,
 :data:`CACHE_MAX_BYTES` bytes of arrays, least recently used first out),
 keyed by the file's resolved path, device, inode, size and modification and
 change times (nanoseconds): loading the same, unchanged file again returns the
-same :class:`MeshData`, whose arrays are read-only.
+same :class:`MeshData`, whose arrays are read-only. Files of
+:data:`DISK_MIN_BYTES` or more are also kept parsed on disk, in
+``~/.cache/whitted/meshes`` (:mod:`tracer.cache`'s rules: data only, this user's,
+checked when read as the reader's own output is), keyed by a SHA-256 of the file's
+bytes and of this module's source, so that a new process, or a copy of the file
+elsewhere, skips the parse.
 
 References: the OBJ format is Wavefront's "Object Files (.obj)" appendix of
 the Advanced Visualizer manual; the PLY format is Greg Turk's "The PLY Polygon
@@ -199,13 +204,105 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
     if mesh is not None:
         _cache.move_to_end(key)
         return mesh
-    mesh = _read_mesh(path, key[3], flip_tex_coords)
+    disk = _disk_entry(path, key) if key[3] >= DISK_MIN_BYTES else None
+    mesh = _disk_read(disk) if disk is not None else None
+    if mesh is None:
+        mesh = _read_mesh(path, key[3], flip_tex_coords)
+        if disk is not None and _identity(path) == key[:-1]:
+            _disk_write(disk, mesh)
     for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
         if a is not None:
             a.flags.writeable = False
     if _identity(path) == key[:-1]:  # not cached if the file changed while it was read
         _remember(key, mesh)
     return mesh
+
+
+# ---------------------------------------------------------------------------
+# The cache on disk: parsed meshes, keyed by the file's bytes
+# ---------------------------------------------------------------------------
+
+#: Files at least this large are kept parsed on disk (smaller ones parse in milliseconds).
+DISK_MIN_BYTES = 1 << 20
+#: The disk cache's bound, all meshes together; the least recently used go first.
+DISK_MAX_BYTES = 2 << 30
+_SOURCE_DIGEST: str | None = None
+
+
+def disk_folder() -> Path:
+    """``$XDG_CACHE_HOME/whitted/meshes``: parsed mesh files (:mod:`tracer.cache`'s rules)."""
+    from whitted.tracer import cache
+
+    return cache.home() / "meshes"
+
+
+def _source_digest() -> str:
+    """A hash of this module's source: an entry parsed by another reader is never used."""
+    global _SOURCE_DIGEST
+    if _SOURCE_DIGEST is None:
+        from whitted.tracer.cache import content_key
+
+        _SOURCE_DIGEST = content_key(Path(__file__).read_bytes())
+    return _SOURCE_DIGEST
+
+
+def _disk_entry(path: Path, key: tuple) -> Path | None:
+    """Where the parse of this file's bytes (with this flip option) is kept, or None when
+    the file cannot be read whole or changed while it was hashed."""
+    from whitted.tracer.cache import content_key
+
+    try:
+        with open(path, "rb") as fh:
+            data = fh.read(key[3] + 1)
+    except OSError:
+        return None   # the reader names the problem
+    if len(data) != key[3] or _identity(path) != key[:-1]:
+        return None
+    flip = {None: "default", True: "flip", False: "keep"}[key[-1]]
+    return disk_folder() / f"{content_key(_source_digest(), flip, data)}.arrays"
+
+
+_DISK_KINDS = {"vertices": "<f8", "faces": "<i8"}
+_DISK_OPTIONAL = {"normals": "<f8", "uvs": "<f8"}
+
+
+def _disk_read(entry: Path) -> MeshData | None:
+    """The mesh kept at ``entry`` if it holds what the reader could have made, else None.
+
+    Checked as the reader's own output is: shapes, at least one face, indices that
+    name a vertex, values float32 can hold, normals float32 can normalise.
+    """
+    from whitted.tracer import cache
+
+    if cache.folder(entry.parent, create=False) is None:
+        return None
+    a = cache.read_arrays(entry, _DISK_KINDS, _DISK_OPTIONAL)
+    if a is None:
+        return None
+    v, f = a["vertices"], a["faces"]
+    n, uv = a.get("normals"), a.get("uvs")
+    if (v.ndim != 2 or v.shape[1] != 3 or f.ndim != 2 or f.shape[1] != 3 or len(f) == 0
+            or int(f.min()) < 0 or int(f.max()) >= len(v)
+            or (n is not None and n.shape != v.shape)
+            or (uv is not None and uv.shape != (len(v), 2))
+            or _first_bad(v) is not None or (uv is not None and _first_bad(uv) is not None)
+            or (n is not None and _first_bad(n, normal=True) is not None)):
+        return None
+    cache.touch(entry)
+    return MeshData(v, f, n, uv)
+
+
+def _disk_write(entry: Path, mesh: MeshData) -> None:
+    """Keep ``mesh`` at ``entry``; a cache only saves time, so a failure is silent."""
+    from whitted.tracer import cache
+
+    if cache.folder(entry.parent) is None:
+        return
+    arrays = {"vertices": mesh.vertices, "faces": np.asarray(mesh.faces, dtype=np.int64)}
+    arrays.update({k: v for k, v in (("normals", mesh.normals), ("uvs", mesh.uvs))
+                   if v is not None})
+    if cache.write_bytes(entry, cache.pack_arrays(arrays)):
+        cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
 
 
 def _identity(path: Path) -> tuple:
@@ -355,22 +452,32 @@ def compute_vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarra
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     p = [v[f[:, k]] for k in range(3)]
-    n = np.cross(p[1] - p[0], p[2] - p[0])
-    length = np.linalg.norm(n, axis=1, keepdims=True)
-    valid = length[:, 0] > 0
-    n = np.divide(n, length, out=np.zeros_like(n), where=length > 0)
-    out = np.zeros_like(v)
-    for k in range(3):
-        a = _unit(p[(k + 1) % 3] - p[k])
-        b = _unit(p[(k + 2) % 3] - p[k])
-        angle = 2 * np.arctan2(np.linalg.norm(a - b, axis=1), np.linalg.norm(a + b, axis=1))
-        w = np.where(valid, angle, 0.0)[:, None] * n
-        for c in range(3):
-            out[:, c] += np.bincount(f[:, k], weights=w[:, c], minlength=len(v))
-    length = np.linalg.norm(out, axis=1, keepdims=True)
+    e = [p[(k + 1) % 3] - p[k] for k in range(3)]   # edge k runs from corner k to k + 1
+    n = np.cross(e[0], -e[2])
+    length = _length(n)
+    valid = length > 0
+    n = np.divide(n, length[:, None], out=np.zeros_like(n), where=valid[:, None])
+    u = [np.divide(x, ln[:, None], out=np.zeros_like(x), where=ln[:, None] > 0)
+         for x, ln in ((x, _length(x)) for x in e)]
+    # The weight of face j at its corner k (row j, column k), laid out as f is.
+    w = np.empty(f.shape, np.float64)
+    for k in range(3):   # the angle at corner k, between edge k and edge k - 1 reversed
+        a, b = u[k], -u[(k + 2) % 3]
+        w[:, k] = np.where(valid, 2 * np.arctan2(_length(a - b), _length(a + b)), 0.0)
+    out = np.empty_like(v)
+    corners = f.reshape(-1)
+    for c in range(3):
+        out[:, c] = np.bincount(corners, weights=(w * n[:, c:c + 1]).reshape(-1),
+                                minlength=len(v))
+    length = _length(out)[:, None]
     out = np.divide(out, length, out=np.zeros_like(out), where=length > 0)
     out[length[:, 0] == 0] = (1.0, 0.0, 0.0)  # Mitsuba's placeholder for an isolated vertex
     return out
+
+
+def _length(a: np.ndarray) -> np.ndarray:
+    """The Euclidean length of each row (einsum: no (N, 3) temporary, unlike linalg.norm)."""
+    return np.sqrt(np.einsum("ij,ij->i", a, a))
 
 
 def _unit(a: np.ndarray) -> np.ndarray:

@@ -76,3 +76,48 @@ def test_nearby_max_depths_share_the_stack_kernel():
 
     assert kernels(3) == kernels(8) == kernels(5)
     assert kernels(9) == kernels(16) != kernels(8)
+
+
+def _launches(fn) -> list:
+    """(hash, operation count) of each JIT kernel ``fn`` launched, in order."""
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    try:
+        fn()
+        return [(k["hash"], k["operation_count"]) for k in dr.kernel_history()
+                if k["type"] == dr.KernelType.JIT and "hash" in k]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+
+@pytest.mark.parametrize("name", ["mesh_knot", "three_lights"])
+def test_every_chunk_and_every_new_integrator_reuse_the_render_kernel(name):
+    """A render in 3 chunks (the last one smaller) launches its shading kernel 3 times,
+    one hash; a second Integrator, the first still alive, launches the same kernels.
+    Before each chunk was traced in a scope of its own, Dr.Jit's value numbering merged
+    the first chunk's constants with values alive from before (the lights'), so the first
+    chunk of each Integrator was another kernel, compiled apart (issue 33)."""
+    backend.use()
+    scene = load_scene(resolve_scene(name)).with_overrides(size=(16, 12), spp=4)
+    chunk = 16 * 12 * 4 // 3 + 64   # 3 chunks of whole pixels, the last one smaller
+    first = Integrator(scene, chunk_samples=chunk)
+    launched = _launches(first.render)
+    big = max(ops for _, ops in launched)
+    shading = [h for h, ops in launched if ops == big]
+    assert len(shading) == 3 and len(set(shading)) == 1, launched
+    second = Integrator(scene, chunk_samples=chunk)
+    assert {h for h, _ in _launches(second.render)} == {h for h, _ in launched}
+
+
+def test_host3_reads_an_array3f_without_a_kernel():
+    """``Array3f.numpy()`` runs a kernel with the width written into it (a new compile for
+    each BVH level's width); :func:`backend.host3` copies the evaluated components."""
+    from whitted.tracer.backend import host3
+
+    backend.use()
+    for n in (5, 7):
+        v = jit.Array3f(dr.arange(jit.Float, n), dr.arange(jit.Float, n) * 2,
+                        dr.arange(jit.Float, n) * 3)
+        dr.eval(v)
+        assert _hashes(lambda v=v: host3(v)) == set()
+        np.testing.assert_array_equal(host3(v), v.numpy().T)

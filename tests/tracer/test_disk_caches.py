@@ -1,0 +1,279 @@
+"""Parsed meshes and built BVHs kept on disk (issue 33): data only, checked when read.
+
+A process that loads a large mesh another process loaded before reads the parse
+(tracer/meshio.py) and the tree (tracer/bvh.py) from ``~/.cache/whitted`` instead
+of making them again. The laws, as for the other caches (test_cache_safety.py):
+an entry is used only when it holds what the reader or the builder could have
+made; anything else is made again and replaced, never fatal. The thresholds
+(a 1 MiB file, 32,768 triangles) are lowered here so that small meshes use the
+caches.
+"""
+
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import pytest
+
+from whitted.tracer import bvh, cache, meshio
+from whitted.tracer.meshio import load_mesh, write_ply
+
+
+@pytest.fixture
+def home(tmp_path, monkeypatch):
+    """whitted's cache folder in tmp_path, the thresholds at zero, memory caches empty."""
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    monkeypatch.setattr(meshio, "DISK_MIN_BYTES", 0)
+    monkeypatch.setattr(bvh, "DISK_MIN_TRIANGLES", 0)
+    meshio.clear_cache()
+    bvh._RECENT.clear()
+    yield tmp_path / "xdg" / "whitted"
+    meshio.clear_cache()
+    bvh._RECENT.clear()
+
+
+def _sphere_obj(path, n=12):
+    """A UV sphere as OBJ (v, vt, vn, v/vt/vn faces): positions, uvs and normals to keep."""
+    th, ph = np.meshgrid(np.linspace(0.1, 3.0, n), np.linspace(0, 2 * np.pi, n, endpoint=False),
+                         indexing="ij")
+    p = np.stack([np.sin(th) * np.cos(ph), np.sin(th) * np.sin(ph), np.cos(th)], -1).reshape(-1, 3)
+    lines = [f"v {x:.6f} {y:.6f} {z:.6f}" for x, y, z in p]
+    lines += [f"vt {i / len(p):.6f} 0.5" for i in range(len(p))]
+    lines += [f"vn {x:.6f} {y:.6f} {z:.6f}" for x, y, z in p]
+    for i in range(n - 1):
+        for j in range(n):
+            a, b = i * n + j + 1, i * n + (j + 1) % n + 1
+            c, d = a + n, b + n
+            lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {d}/{d}/{d}", f"f {a}/{a}/{a} {d}/{d}/{d} {c}/{c}/{c}"]
+    path.write_text("\n".join(lines) + "\n")
+    return path
+
+
+def _entries(folder):
+    return sorted(folder.glob("*.arrays")) if folder.exists() else []
+
+
+def _no_parse(monkeypatch):
+    def refuse(*a, **k):
+        raise AssertionError("parsed again")
+    monkeypatch.setattr(meshio, "_read_mesh", refuse)
+
+
+# ------------------------------------------------------------------ meshes
+
+
+def test_a_mesh_read_again_comes_from_its_entry_and_equals_the_parse(home, tmp_path,
+                                                                     monkeypatch):
+    path = _sphere_obj(tmp_path / "s.obj")
+    first = load_mesh(path)
+    [entry] = _entries(home / "meshes")
+    assert os.stat(entry).st_mode & 0o777 == 0o600
+    meshio.clear_cache()
+    with monkeypatch.context() as m:
+        _no_parse(m)
+        again = load_mesh(path)
+    for a, b in ((first.vertices, again.vertices), (first.faces, again.faces),
+                 (first.normals, again.normals), (first.uvs, again.uvs)):
+        np.testing.assert_array_equal(a, b)
+        assert not b.flags.writeable
+    # the flip option is part of the key: another entry, the parse's own uvs
+    meshio.clear_cache()
+    kept = load_mesh(path, flip_tex_coords=False)
+    np.testing.assert_array_equal(kept.uvs[:, 1], 1 - first.uvs[:, 1])
+    assert len(_entries(home / "meshes")) == 2
+
+
+def test_a_copy_of_the_file_elsewhere_uses_the_same_entry(home, tmp_path, monkeypatch):
+    path = _sphere_obj(tmp_path / "s.obj")
+    load_mesh(path)
+    copy = tmp_path / "elsewhere" / "copy.obj"
+    copy.parent.mkdir()
+    copy.write_bytes(path.read_bytes())
+    with monkeypatch.context() as m:
+        _no_parse(m)
+        load_mesh(copy)
+    assert len(_entries(home / "meshes")) == 1
+
+
+def _tamper_mesh(entry, how):
+    a = cache.read_arrays(entry, meshio._DISK_KINDS, meshio._DISK_OPTIONAL)
+    a = {k: np.array(v) for k, v in a.items()}
+    if how == "index out of range":
+        a["faces"][3, 1] = len(a["vertices"])
+    elif how == "negative index":
+        a["faces"][0, 0] = -1
+    elif how == "not finite":
+        a["vertices"][2, 0] = np.nan
+    elif how == "beyond float32":
+        a["vertices"][2, 0] = 1e39
+    elif how == "zero normal":
+        a["normals"][1] = 0
+    elif how == "uvs of another shape":
+        a["uvs"] = a["uvs"][:-1]
+    elif how == "faces as float":
+        a["faces"] = a["faces"].astype(np.float64)
+    if how == "truncated":
+        data = cache.pack_arrays(a)[:-8]
+    elif how == "table claims more":
+        data = cache.pack_arrays(a) + b"\0" * 8
+    else:
+        try:
+            data = cache.pack_arrays(a)
+        except ValueError:
+            return False
+    entry.write_bytes(data)
+    return True
+
+
+@pytest.mark.parametrize("how", ["index out of range", "negative index", "not finite",
+                                 "beyond float32", "zero normal", "uvs of another shape",
+                                 "faces as float", "truncated", "table claims more"])
+def test_a_tampered_mesh_entry_is_parsed_again_and_replaced(home, tmp_path, how):
+    path = _sphere_obj(tmp_path / "s.obj")
+    good = load_mesh(path)
+    [entry] = _entries(home / "meshes")
+    assert _tamper_mesh(entry, how)
+    assert meshio._disk_read(entry) is None
+    meshio.clear_cache()
+    again = load_mesh(path)
+    np.testing.assert_array_equal(again.faces, good.faces)
+    np.testing.assert_array_equal(again.vertices, good.vertices)
+    assert meshio._disk_read(entry) is not None   # replaced by the new parse
+
+
+def test_an_entry_others_may_write_is_not_read(home, tmp_path, monkeypatch):
+    path = _sphere_obj(tmp_path / "s.obj")
+    load_mesh(path)
+    [entry] = _entries(home / "meshes")
+    os.chmod(entry, 0o666)
+    assert meshio._disk_read(entry) is None
+    os.chmod(entry, 0o600)
+    os.chmod(entry.parent, 0o777)
+    assert meshio._disk_read(entry) is None
+
+
+def test_small_files_stay_off_the_disk(tmp_path, monkeypatch):
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
+    meshio.clear_cache()
+    load_mesh(_sphere_obj(tmp_path / "s.obj"))
+    assert not (tmp_path / "xdg" / "whitted" / "meshes").exists()
+    meshio.clear_cache()
+
+
+# ------------------------------------------------------------------ trees
+
+
+def _knot_corners(tmp_path):
+    import sys
+
+    from conftest import SCENES
+    sys.path.insert(0, str(SCENES / "meshes"))
+    from generate import torus_knot
+    v, f = torus_knot(40, 12)
+    return [np.asarray(v, np.float64)[f[:, k]] for k in range(3)]
+
+
+def test_a_tree_read_again_comes_from_its_entry_and_equals_the_build(home, tmp_path,
+                                                                     monkeypatch):
+    p = _knot_corners(tmp_path)
+    built = bvh.shared_bvh(*p)
+    [entry] = _entries(home / "bvh")
+    bvh._RECENT.clear()
+    with monkeypatch.context() as m:
+        m.setattr(bvh, "build_bvh", lambda *a, **k: pytest.fail("built again"))
+        read = bvh.shared_bvh(*p)
+    for k in ("lo", "hi", "left", "right", "start", "count", "order"):
+        np.testing.assert_array_equal(getattr(built.arrays, k), getattr(read.arrays, k))
+    assert read.depth == built.depth
+    np.testing.assert_array_equal(built.nodes.numpy(), read.nodes.numpy())
+    # other corners: another entry
+    bvh._RECENT.clear()
+    bvh.shared_bvh(*[q + 1.0 for q in p])
+    assert len(_entries(home / "bvh")) == 2
+
+
+def _mutations(b: bvh.BVHArrays, n: int):
+    """(what, arrays) with one invariant of a tree broken, each a way a walk goes wrong."""
+    inner = np.flatnonzero(b.left >= 0)
+    leaves = np.flatnonzero(b.left < 0)
+
+    def changed(**kw):
+        arrays = {k: np.array(getattr(b, k)) for k in ("lo", "hi", "left", "right", "start",
+                                                       "count", "order")}
+        for k, f in kw.items():
+            f(arrays[k]) if callable(f) else arrays.__setitem__(k, f)
+        return bvh.BVHArrays(**arrays, depth=kw.get("depth_", b.depth), seconds=0.0)
+
+    i, j = inner[-1], leaves[0]
+    yield "child before its parent (a cycle)", changed(left=lambda a: a.__setitem__(i, 0))
+    yield "child out of range", changed(right=lambda a: a.__setitem__(i, len(a)))
+    yield "a node with two parents", changed(right=lambda a: a.__setitem__(
+        inner[0], b.left[inner[0]] if b.left[inner[0]] > inner[0] else a[inner[0]]))
+    yield "leaf past the triangles", changed(start=lambda a: a.__setitem__(j, n))
+    yield "empty leaf", changed(count=lambda a: a.__setitem__(j, 0))
+    yield "leaf over the count field", changed(count=lambda a: a.__setitem__(j, 8))
+    yield "order not a permutation", changed(order=lambda a: a.__setitem__(0, a[1]))
+    yield "order out of range", changed(order=lambda a: a.__setitem__(0, n))
+    yield "a leaf's box misses a triangle", changed(hi=lambda a: a.__setitem__(
+        (j, 0), np.nextafter(a[j, 0], -np.inf, dtype=np.float32)))
+    yield "a child outside its parent's box", changed(lo=lambda a: a.__setitem__(
+        (b.left[i], 1), np.float32(a[i, 1] - 1)))
+    yield "a box not finite", changed(lo=lambda a: a.__setitem__((0, 2), np.nan))
+    yield "arrays of another length", changed(order=lambda a: None, count=b.count[:-1].copy())
+
+
+def test_every_broken_invariant_fails_the_check(tmp_path):
+    p = _knot_corners(tmp_path)
+    b = bvh.build_bvh(*p)
+    assert bvh.valid_arrays(b, *p)
+    for what, bad in _mutations(b, len(p[0])):
+        assert not bvh.valid_arrays(bad, *p), what
+    deeper = bvh.BVHArrays(b.lo, b.hi, b.left, b.right, b.start, b.count, b.order,
+                           b.depth + 1, 0.0)
+    assert not bvh.valid_arrays(deeper, *p), "depth"   # the traversal stack's size
+    # the same tree over moved triangles: boxes no longer hold them
+    assert not bvh.valid_arrays(b, *[q + 0.01 for q in p])
+
+
+def test_a_tampered_tree_is_built_again_and_replaced(home, tmp_path, monkeypatch):
+    p = _knot_corners(tmp_path)
+    built = bvh.shared_bvh(*p)
+    [entry] = _entries(home / "bvh")
+    a = cache.read_arrays(entry, bvh._ARRAY_KINDS)
+    a = {k: np.array(v) for k, v in a.items()}
+    a["hi"][np.flatnonzero(a["left"] < 0)[0]] -= 0.5    # a leaf's box misses its triangles
+    entry.write_bytes(cache.pack_arrays(a))
+    bvh._RECENT.clear()
+    calls = []
+    real = bvh.build_bvh
+    monkeypatch.setattr(bvh, "build_bvh", lambda *x, **k: calls.append(1) or real(*x, **k))
+    again = bvh.shared_bvh(*p)
+    assert calls == [1]
+    np.testing.assert_array_equal(again.arrays.hi, built.arrays.hi)
+    stored = cache.read_arrays(entry, bvh._ARRAY_KINDS)
+    np.testing.assert_array_equal(stored["hi"], built.arrays.hi)
+
+
+def test_pack_arrays_refuses_objects_and_read_arrays_refuses_other_names(tmp_path):
+    with pytest.raises(ValueError):
+        cache.pack_arrays({"x": np.array([object()])})
+    path = tmp_path / "e.arrays"
+    path.write_bytes(cache.pack_arrays({"x": np.arange(3.0)}))
+    os.chmod(path, 0o600)
+    assert cache.read_arrays(path, {"x": "<f8"})["x"].tolist() == [0.0, 1.0, 2.0]
+    assert cache.read_arrays(path, {"y": "<f8"}) is None
+    assert cache.read_arrays(path, {"x": "<f4"}) is None
+    assert cache.read_arrays(path, {"x": "<f8"}, limit=16) is None
+    path.write_bytes(b"\x93NUMPY" + path.read_bytes())
+    assert cache.read_arrays(path, {"x": "<f8"}) is None
+
+
+def test_prune_keeps_the_cache_under_its_bound_dropping_the_least_recently_used(tmp_path):
+    folder = tmp_path / "c"
+    folder.mkdir()
+    for k in range(4):
+        (folder / f"{k}.arrays").write_bytes(b"x" * 100)
+        os.utime(folder / f"{k}.arrays", ns=(k * 10**9, k * 10**9))
+    cache.prune(folder, 250, keep=folder / "0.arrays")
+    assert sorted(p.name for p in folder.iterdir()) == ["0.arrays", "3.arrays"]
