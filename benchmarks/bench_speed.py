@@ -12,7 +12,7 @@ process whose kernels are cached, the everyday case.
                                                 [--schedule auto|wavefront|stack]
     python benchmarks/bench_speed.py quality    [--size 200x150] [--rel-rmse 0.02] [SCENE ...]
     python benchmarks/bench_speed.py memory     [--size 1920x1080] [--spp 256] [--depth 25]
-    python benchmarks/bench_speed.py report     [--quick] [--against COMMIT [--rounds 2]]
+    python benchmarks/bench_speed.py report     [--quick] [--cold] [--against COMMIT [--rounds 2]]
     python benchmarks/bench_speed.py process    [--size 640x480] [--spp 16] [--repeat 5]
                                                 [--triangles 160000] [--ply-triangles 1000000]
     python benchmarks/bench_speed.py all        (all of them at their defaults, but memory
@@ -26,7 +26,9 @@ slower than Mitsuba loads the scene and a render <= 1.5x Embree's; recursion,
 >= 150 M rays/s on two cores beside minray's own rate; equal quality, the
 tracer reaching an RMSE >= 10x sooner than Mitsuba's `path`; memory, the peak
 of a 1920x1080, 256 spp, DEPTH 25 render < 4 GB; `whitted report` (full) timed
-with the commit it ran on.
+with the commit it ran on, and with --cold a cold report <= 2x a warm one, the
+warm one no slower than --against's; whole processes on mesh scenes <= 1.0x a
+whole Mitsuba process, cold and warm.
 """
 
 from __future__ import annotations
@@ -411,13 +413,36 @@ def cmd_memory(args) -> int:
 # ------------------------------------------------------------------ 6. whitted report
 
 
-def _time_report(root: Path, quick: bool) -> tuple[float, int, int]:
+def _import_root(root: Path) -> Path:
+    """A folder that, first on PYTHONPATH, makes ``import whitted.tracer`` (and .reference,
+    .scenes) load the checkout at ``root``: a ``whitted`` folder of links to its tracer/,
+    reference/ and scenes/. This environment's editable install maps those names to its
+    own checkout, which PYTHONPATH=root alone does not override (the repository's root is
+    not a ``whitted`` folder): a baseline's report would run this checkout's code."""
+    if root.resolve() == ROOT:
+        return ROOT
+    top = root / ".whitted-import"
+    (top / "whitted").mkdir(parents=True, exist_ok=True)
+    for name in ("tracer", "reference", "scenes"):
+        link = top / "whitted" / name
+        if not link.exists():
+            link.symlink_to(root / name, target_is_directory=True)
+    return top
+
+
+def _time_report(root: Path, quick: bool, caches: Path | None = None
+                 ) -> tuple[float, int, int]:
     """One full `whitted report` of the checkout at ``root``, run as ``python -m
-    reference.cli`` with this environment's Python: (seconds, exit status, peak bytes)."""
+    reference.cli`` with this environment's Python: (seconds, exit status, peak bytes).
+    ``caches``: a folder that holds its HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR (empty
+    before a cold run; kept for a warm one), else this user's own."""
     with tempfile.TemporaryDirectory() as tmp:
         cmd = [sys.executable, "-m", "whitted.reference.cli", "report", "-o", tmp]
         cmd += ["--quick"] if quick else []
-        env = dict(os.environ, PYTHONPATH=str(root))
+        env = dict(os.environ, PYTHONPATH=str(_import_root(root)))
+        if caches is not None:
+            env.update(HOME=str(caches), XDG_CACHE_HOME=str(caches / ".cache"),
+                       DRJIT_CACHE_DIR=str(caches / ".drjit"))
         t0 = time.perf_counter()
         proc = subprocess.Popen(cmd, cwd=root, env=env, stdout=subprocess.DEVNULL,
                                 stderr=subprocess.DEVNULL)
@@ -426,10 +451,60 @@ def _time_report(root: Path, quick: bool) -> tuple[float, int, int]:
     return secs, os.waitstatus_to_exitcode(status), usage.ru_maxrss * 1024
 
 
+def _cold_and_warm(root: Path, quick: bool) -> tuple[float, float]:
+    """A report with every cache empty (Dr.Jit's kernels, whitted's), then one more with
+    the caches the first one left: (cold seconds, warm seconds)."""
+    caches = Path(tempfile.mkdtemp(prefix="whitted-cold-"))
+    try:
+        cold, rc_cold, _ = _time_report(root, quick, caches)
+        warm, rc_warm, _ = _time_report(root, quick, caches)
+    finally:
+        shutil.rmtree(caches, ignore_errors=True)
+    if rc_cold or rc_warm:
+        print(f"  exit status {rc_cold} cold, {rc_warm} warm")
+    return cold, warm
+
+
+def cmd_report_cold(args, rev: str) -> int:
+    """Cold against warm, for this checkout and (--against) a baseline commit."""
+    roots = [(rev, ROOT)]
+    wt = None
+    if args.against:
+        wt = Path(tempfile.mkdtemp(prefix="whitted-baseline-")) / "tree"
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
+                        args.against], check=True, capture_output=True)
+        roots.insert(0, (args.against, wt))
+    figures = {}
+    try:
+        for k in range(args.rounds if args.against else 1):
+            for label, root in roots:
+                cold, warm = _cold_and_warm(root, args.quick)
+                figures.setdefault(label, []).append((cold, warm))
+                print(f"  round {k + 1}: {label:<12} cold {cold:6.1f} s, warm {warm:6.1f} s, "
+                      f"cold / warm {cold / warm:.2f} (target <= 2: "
+                      f"{verdict(cold <= 2 * warm)})", flush=True)
+    finally:
+        if wt is not None:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
+                           capture_output=True)
+            shutil.rmtree(wt.parent, ignore_errors=True)
+    if args.against:
+        ratios = [t[1] / b[1] for t, b in zip(figures[rev], figures[args.against],
+                                              strict=True)]
+        print(f"  warm, this checkout's time over {args.against}'s, round by round: "
+              + ", ".join(f"{r:.2f}x" for r in ratios)
+              + f" (target <= 1.0: {verdict(max(ratios) <= 1.0)})")
+    print("  cold: empty HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR; warm: the same folders "
+          "again, as the cold run left them")
+    return 0
+
+
 def cmd_report(args) -> int:
     rev = commit()
     what = "--quick" if args.quick else "full"
     print(f"whitted report ({what}) at commit {rev}; {machine_note()}", flush=True)
+    if args.cold:
+        return cmd_report_cold(args, rev)
     if not args.against:
         secs, rc, peak = _time_report(ROOT, args.quick)
         print(f"  {secs:.0f} s ({secs / 60:.1f} min), exit status {rc}, peak {mb(peak)}")
@@ -699,6 +774,9 @@ def main(argv=None) -> int:
                          "ratios (the target's baseline: 8535128)")
     rp.add_argument("--rounds", type=lambda v: max(1, int(v)), default=2,
                     help="rounds of the two reports with --against (default 2)")
+    rp.add_argument("--cold", action="store_true",
+                    help="each report twice: with every cache empty (a fresh machine, CI's "
+                    "case), then warm; with --against, the warm times compared")
 
     pr = sub.add_parser("process", help="whole `whitted render` process against a whole "
                         "Python process rendering with Mitsuba's direct, on mesh scenes, "

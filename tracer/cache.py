@@ -1,8 +1,13 @@
 """Caches hold data: where they live and how an entry is checked.
 
-whitted keeps two caches on disk, both data, never code: the answers of the
-libLLVM probe (:mod:`tracer.llvm`, one JSON file) and the scenes' images with
-a formula bug (:mod:`reference.check.suspects`, .npy files). They live under
+whitted keeps four caches on disk, all data, never code: the answers of the
+libLLVM probe (:mod:`tracer.llvm`, one JSON file), the scenes' images with a
+formula bug (:mod:`reference.check.suspects`, .npy files), large meshes parsed
+and their computed vertex normals (:mod:`tracer.meshio`, ``meshes/``) and the
+BVHs built over them (:mod:`tracer.bvh`, ``bvh/``), the last two as arrays
+entries (:func:`pack_arrays`: a JSON table of names, dtypes and shapes, then
+raw numbers; read by :func:`read_arrays`, which checks the table against the
+file before reading any data). They live under
 ``$XDG_CACHE_HOME/whitted`` (``~/.cache/whitted``; the XDG Base Directory
 Specification), in folders this module makes 0700, with files written 0600
 through a temporary file and a rename (whole or absent, also with processes

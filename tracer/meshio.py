@@ -86,7 +86,7 @@ from whitted.tracer.errors import UserError
 from whitted.tracer.files import special_kind
 
 __all__ = ["CACHE_MAX_BYTES", "CACHE_MAX_MESHES", "MeshData", "MeshError", "clear_cache",
-           "compute_vertex_normals", "face_normals", "load_mesh"]
+           "compute_vertex_normals", "face_normals", "load_mesh", "vertex_normals"]
 
 #: The largest finite float32: positions, normals and uvs beyond it are infinite to the tracer.
 FLOAT32_MAX = float(np.finfo(np.float32).max)
@@ -290,6 +290,38 @@ def _disk_read(entry: Path) -> MeshData | None:
         return None
     cache.touch(entry)
     return MeshData(v, f, n, uv)
+
+
+#: Meshes of at least this many faces keep their computed vertex normals on disk.
+DISK_MIN_FACES = 1 << 15
+
+
+def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """:func:`compute_vertex_normals`, kept on disk (beside the parsed meshes) for meshes
+    of :data:`DISK_MIN_FACES` faces or more, keyed by a SHA-256 of the vertices, the
+    faces and this module's source. An entry is used only when it has one unit normal
+    (or Mitsuba's placeholder) per vertex."""
+    from whitted.tracer import cache
+
+    v = np.ascontiguousarray(vertices, dtype=np.float64)
+    f = np.ascontiguousarray(faces, dtype=np.int64)
+    if len(f) < DISK_MIN_FACES:
+        return compute_vertex_normals(v, f)
+    entry = disk_folder() / f"{cache.content_key(_source_digest(), 'normals', v, f)}.arrays"
+    if cache.folder(entry.parent, create=False) is not None:
+        a = cache.read_arrays(entry, {"normals": "<f8"})
+        if a is not None and a["normals"].shape == v.shape:
+            n = a["normals"]
+            with np.errstate(invalid="ignore"):
+                unit = np.abs(_length(n) - 1.0) <= 1e-12
+            if unit.all():
+                cache.touch(entry)
+                return n.copy()
+    n = compute_vertex_normals(v, f)
+    if cache.folder(entry.parent) is not None and cache.write_bytes(
+            entry, cache.pack_arrays({"normals": n})):
+        cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
+    return n
 
 
 def _disk_write(entry: Path, mesh: MeshData) -> None:

@@ -25,6 +25,7 @@ def home(tmp_path, monkeypatch):
     """whitted's cache folder in tmp_path, the thresholds at zero, memory caches empty."""
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "xdg"))
     monkeypatch.setattr(meshio, "DISK_MIN_BYTES", 0)
+    monkeypatch.setattr(meshio, "DISK_MIN_FACES", 0)
     monkeypatch.setattr(bvh, "DISK_MIN_TRIANGLES", 0)
     meshio.clear_cache()
     bvh._RECENT.clear()
@@ -159,6 +160,28 @@ def test_small_files_stay_off_the_disk(tmp_path, monkeypatch):
     load_mesh(_sphere_obj(tmp_path / "s.obj"))
     assert not (tmp_path / "xdg" / "whitted" / "meshes").exists()
     meshio.clear_cache()
+
+
+def test_vertex_normals_come_from_their_entry_and_a_wrong_one_is_computed_again(
+        home, tmp_path, monkeypatch):
+    m = load_mesh(_sphere_obj(tmp_path / "s.obj"))
+    v = m.vertices * 2.0 + 1.0          # as a placed mesh's vertices
+    first = meshio.vertex_normals(v, m.faces)
+    np.testing.assert_array_equal(first, meshio.compute_vertex_normals(v, m.faces))
+    entries = set(_entries(home / "meshes"))
+    with monkeypatch.context() as mp:
+        mp.setattr(meshio, "compute_vertex_normals", lambda *a: pytest.fail("computed"))
+        np.testing.assert_array_equal(meshio.vertex_normals(v, m.faces), first)
+    [entry] = [e for e in entries if cache.read_arrays(e, {"normals": "<f8"}) is not None]
+    bad = first.copy()
+    bad[0] *= 1.5                         # not a unit normal: not what the code computes
+    entry.write_bytes(cache.pack_arrays({"normals": bad}))
+    np.testing.assert_array_equal(meshio.vertex_normals(v, m.faces), first)
+    np.testing.assert_array_equal(cache.read_arrays(entry, {"normals": "<f8"})["normals"],
+                                  first)
+    # other vertices (another placement): another entry
+    meshio.vertex_normals(v * 3.0, m.faces)
+    assert len(_entries(home / "meshes")) == len(entries) + 1
 
 
 # ------------------------------------------------------------------ trees

@@ -49,7 +49,7 @@ MODEL = Mesh
 
 
 def parse(t: Table, ctx: base.Context) -> Mesh:
-    from whitted.tracer.meshio import MeshError, compute_vertex_normals, load_mesh
+    from whitted.tracer.meshio import MeshError, load_mesh, vertex_normals
 
     m = ctx.to_world()
     name = t.string("file")
@@ -69,7 +69,7 @@ def parse(t: Table, ctx: base.Context) -> Mesh:
             normals = (data.normals @ m[:3, :3].T if faults.on("normals-by-matrix")
                        else tf.apply_normal(m, data.normals))
         else:  # as Mitsuba does: from the faces, after to_world
-            normals = compute_vertex_normals(verts, data.faces)
+            normals = vertex_normals(verts, data.faces)
         normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
     return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
                 as_tuple(m), ctx.material, ctx.emitter, ctx.placement())
