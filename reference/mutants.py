@@ -6,7 +6,8 @@ into one formula of the lectures (lecture 1: "Ray tracing", TU Wien 186.101;
 lecture 2: UCSD CSE 168, "Ray-surface intersection, shading"), named by an
 id, with the formula as the bug computes it and as it should be, the slide
 topic it belongs to, and the formula function of the tracer that carries its
-switch (one ``if faults.on("id")`` there, :mod:`tracer.faults`). Nothing is
+switch (one ``faults.pick("id", ...)``, or ``if faults.on("id")``, there:
+:mod:`tracer.faults`). Nothing is
 edited: ``with faults.active("lambert-no-inv-pi"): ...`` renders the tracer
 with that bug.
 
@@ -35,11 +36,16 @@ Cost. Each reference is rendered once per scene and reused for every bug
 (a bug changes the tracer, never Mitsuba); a bug is rendered only on the
 scenes where its switch is reached (:func:`tracer.faults.recording` while the
 tracer as written renders the scene: a switch never asked about cannot change
-the image). What remains is dominated by compiling each bug's kernels, which
-Dr.Jit then keeps in its kernel cache on disk.
+the image). The bugs decided by ``faults.pick`` are rendered with the bug's
+number an input of the kernel (``faults.active(id, shared_kernel=True)``): one
+kernel a scene serves all of them, compiled once (a cold ``whitted report
+--quick`` 320 s to 156 s, issue 33); a bug decided by ``faults.on`` (a scene
+read again, a spot's profile) still has kernels of its own. Dr.Jit keeps every
+kernel in its cache on disk.
 
-Adding a bug: one :class:`Mutant` entry in :data:`CATALOG` and one ``if
-faults.on("id")`` in the formula it breaks (``docs/extending.md``).
+Adding a bug: one :class:`Mutant` entry in :data:`CATALOG` and one switch,
+``faults.pick("id", ...)`` (or ``if faults.on("id")``), in the formula it breaks
+(``docs/extending.md``).
 """
 
 from __future__ import annotations
@@ -68,7 +74,8 @@ class Mutant:
     correct: str
     #: the lecture slide topic it belongs to, e.g. 'lecture 1, "Snell's law"'
     topic: str
-    #: the tracer function whose ``faults.on(id)`` switches it, "path: function"
+    #: the tracer function whose ``faults.pick(id, ...)`` or ``faults.on(id)`` switches
+    #: it, "path: function"
     where: str
     #: the deterministic reference reads the same code (tracer.sampling), so only the
     #: one-lobe reference can see the bug
@@ -857,7 +864,9 @@ def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):
             continue          # the reference reads the same code: blind by construction
         seen_by_any = True
         try:
-            with faults.active(m.id):
+            # the bug's number an input of the kernel: one kernel a scene serves every bug
+            # decided by faults.pick (issue 33), the same images
+            with faults.active(m.id, shared_kernel=True):
                 image = shared_tracer_image(scene) if u.renders_tracer else None
                 checks = u.judge(image, scene)
         except Exception as e:  # a bug that crashes the tracer is not a catch of the harness

@@ -206,10 +206,11 @@ def read_arrays(path: Path, expect: dict[str, str], optional: dict[str, str] | N
     """The arrays of an entry :func:`pack_arrays` wrote, or None for anything else.
 
     ``expect`` maps each name the entry must hold to its dtype (``"<f8"`` ...),
-    ``optional`` each name it may hold. The entry must pass :func:`open_entry`, hold exactly those names with those
-    dtypes, and its table's shapes and offsets must tile the data to the last
-    byte (header checked before any data is read; ``limit`` bounds the size).
-    Values are the caller's to check (ranges, finiteness, consistency).
+    ``optional`` each name it may hold. The entry must pass :func:`open_entry`,
+    hold those names with those dtypes, and its table's shapes and offsets must
+    tile the data to the last byte (the header is checked before any data is
+    read; ``limit`` bounds the file's size). Values are the caller's to check
+    (ranges, finiteness, consistency).
     """
     f = open_entry(path)
     if f is None:
@@ -250,7 +251,7 @@ def read_arrays(path: Path, expect: dict[str, str], optional: dict[str, str] | N
     if len(data) != at:
         return None
     out = {}
-    for offset, nbytes, name in spans:
+    for offset, _, name in spans:
         dtype, shape, _ = table[name]
         out[name] = np.frombuffer(data, dtype=np.dtype(dtype), count=math.prod(shape),
                                   offset=offset).reshape(shape)

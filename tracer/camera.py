@@ -79,14 +79,13 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         film_x, film_y = film_x + dx, film_y + dy
     sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
     sy = 1 - 2 * (film_y / height)         # +1 top .. -1 bottom
-    if faults.on("camera-y-not-flipped"):
-        sy = 2 * (film_y / height) - 1
+    sy = faults.pick("camera-y-not-flipped", lambda: 2 * (film_y / height) - 1, sy)
     eye = _vec(camera.origin)
     if camera.type == "perspective":
         tan_half = math.tan(math.radians(camera.fov_x(aspect)) / 2)
         d = f + (sx * tan_half) * r + (sy * tan_half / aspect) * up
-        if faults.on("fov-vertical-for-horizontal"):
-            d = f + (sx * tan_half * aspect) * r + (sy * tan_half) * up
+        d = faults.pick("fov-vertical-for-horizontal",
+                        lambda: f + (sx * tan_half * aspect) * r + (sy * tan_half) * up, d)
         length = dr.norm(d)               # = 1 / cos(angle to the axis)
         d = d / length
         near_t = camera.near_clip * length
@@ -100,8 +99,7 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
         tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))
     else:
         half = camera.width / 2
-        if faults.on("ortho-width-as-half"):
-            half = camera.width
+        half = faults.pick("ortho-width-as-half", lambda: camera.width, half)
         o = eye + (sx * half) * r + (sy * half / aspect) * up + camera.near_clip * f
         d = f + dr.zeros(jit.Array3f, dr.width(film_x))
         tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))

@@ -2,13 +2,12 @@
 
 A harness that claims to find a wrong formula must be shown to find it. The
 catalog of plausible bugs (``reference/mutants.py``) names each one by an id,
-and the formula it breaks carries one switch, a Python ``if`` on
-:func:`on`::
+and the formula it breaks carries one switch: :func:`pick`, where the bug is
+another value of the same kind, else a Python ``if`` on :func:`on`::
 
     def reflect(d, n):
-        if faults.on("reflect-sign"):
-            return d + 2 * dr.dot(d, n) * n
-        return d - 2 * dr.dot(d, n) * n
+        return faults.pick("reflect-sign", lambda: d + 2 * dr.dot(d, n) * n,
+                           d - 2 * dr.dot(d, n) * n)
 
 and a caller turns switches on for a block::
 
@@ -24,7 +23,12 @@ cache, in memory and on disk under ``~/.drjit``, is keyed by a hash of the
 generated IR). A switch that is on changes the traced operations, hence the
 IR and its hash, so its kernel is compiled and cached under another key and
 is never taken for the unswitched one (``tests/tracer/test_faults.py`` checks the
-hashes and that switching off restores the image bit for bit). A switch
+hashes and that switching off restores the image bit for bit). :func:`pick`
+calls the wrong value's function only when its bug is on, so it traces the
+same operations as that ``if``. Inside ``active(id, shared_kernel=True)``
+(the formula-bug sweep) a :func:`pick` is decided in the kernel instead, by
+the bug's number, an input of the kernel that is not written into its IR:
+every bug so decided shares one kernel, compiled once a scene. A switch
 decided where a scene is prepared (an emitter's area, an instance's normal
 matrix) holds for Integrators built while it is on.
 
@@ -49,6 +53,9 @@ _active: frozenset[str] = frozenset()
 _declared: set[str] = set()
 #: While :func:`recording`: the ids asked about.
 _asked: set[str] | None = None
+#: Inside :func:`active` with ``shared_kernel``: a jit.UInt32 (opaque) holding the
+#: number of the bug switched on (:func:`_number`), which :func:`pick` compares with.
+_selector = None
 
 
 class UnknownFault(ValueError):
@@ -60,6 +67,40 @@ def on(fault_id: str) -> bool:
     if _asked is not None:
         _asked.add(fault_id)
     return fault_id in _active
+
+
+def pick(fault_id: str, buggy, correct):
+    """``correct``, the formula's value, or ``buggy()`` where the bug ``fault_id`` is on.
+
+    For a switch that chooses between two values of the same kind (numbers, Dr.Jit
+    arrays, or tuples of them). Decided in Python as :func:`on` is, so that the tracer
+    as written traces exactly the formula's operations; inside :func:`active` with
+    ``shared_kernel``, decided in the kernel: ``select(bug == fault_id, buggy(),
+    correct)`` with the bug's number an opaque value, so that every bug decided by
+    :func:`pick` traces the same operations and Dr.Jit compiles one kernel for all of
+    them (issue 33: a formula-bug sweep compiled a kernel per scene and bug).
+    """
+    if _asked is not None:
+        _asked.add(fault_id)
+    if _selector is not None:
+        import drjit as dr
+
+        return _select(_selector == _number(fault_id), buggy(), correct, dr)
+    return buggy() if fault_id in _active else correct
+
+
+def _select(mask, a, b, dr):
+    if isinstance(b, tuple):
+        return tuple(_select(mask, x, y, dr) for x, y in zip(a, b, strict=True))
+    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
+        a, b = float(a), float(b)
+    return dr.select(mask, a, b)
+
+
+def _number(fault_id: str) -> int:
+    """A bug's number in the kernel: its rank among the declared ids (fixed while a
+    catalog is loaded, so that a kernel's constants do not depend on which bug is on)."""
+    return sorted(_declared).index(fault_id) if fault_id in _declared else len(_declared)
 
 
 def declare(ids: Iterable[str]) -> None:
@@ -85,24 +126,37 @@ def asked(ids: Iterable[str]) -> None:
 
 
 @contextmanager
-def active(*ids: str) -> Iterator[frozenset[str]]:
+def active(*ids: str, shared_kernel: bool = False) -> Iterator[frozenset[str]]:
     """Switch the bugs ``ids`` on inside the block (nested blocks add to the outer ones).
+
+    ``shared_kernel`` (one bug, no outer block): the switches of :func:`pick` are
+    decided in the kernel, by a number that is not written into it, so that the bugs
+    decided there share one kernel a scene; :func:`on`'s are decided in Python as
+    always. The image is the same either way, up to the order in which the compiler
+    rounds the same operations (tests/tracer/test_faults.py).
 
     Raises :class:`UnknownFault` for an id that was not declared.
     """
-    global _active
+    global _active, _selector
     unknown = sorted(set(ids) - _declared)
     if unknown:
         raise UnknownFault(f"unknown fault id {unknown[0]!r}" +
                            (f" (and {len(unknown) - 1} more)" if len(unknown) > 1 else "") +
                            (f"; known: {len(_declared)} ids, e.g. {sorted(_declared)[0]!r}"
                             if _declared else "; no catalog has declared any"))
-    saved = _active
+    saved, saved_selector = _active, _selector
     _active = saved | frozenset(ids)
+    if shared_kernel and len(ids) == 1 and not saved:
+        import drjit as dr
+
+        from whitted.tracer.backend import jit
+        _selector = dr.opaque(jit.UInt32, _number(ids[0]))
+    else:
+        _selector = None
     try:
         yield _active
     finally:
-        _active = saved
+        _active, _selector = saved, saved_selector
 
 
 @contextmanager

@@ -39,9 +39,8 @@ def _snell(c, rel):
     """(|cos theta_t|, TIR mask) for |cos theta_i| = c and rel = n_t / n_i."""
     sin2_t = (1 - c * c) / (rel * rel)
     tir = sin2_t > 1
-    if faults.on("tir-ignored"):
-        return dr.sqrt(dr.abs(1 - sin2_t)), sin2_t != sin2_t
-    return dr.sqrt(dr.maximum(1 - sin2_t, 0)), tir
+    return faults.pick("tir-ignored", lambda: (dr.sqrt(dr.abs(1 - sin2_t)), sin2_t != sin2_t),
+                       (dr.sqrt(dr.maximum(1 - sin2_t, 0)), tir))
 
 
 def fresnel_exact(cos_i, eta):
@@ -53,17 +52,15 @@ def fresnel_exact(cos_i, eta):
     internal reflection. R + T = 1. Equal indices give R = 0 at every angle
     (no boundary at all, which also settles the 0/0 of grazing incidence).
     """
-    if faults.on("schlick-for-exact"):
-        return fresnel_schlick(cos_i, eta)
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
     r_s = (c - rel * cos_t) / (c + rel * cos_t)
     r_p = (rel * c - cos_t) / (rel * c + cos_t)
-    r = 0.5 * (r_s * r_s + r_p * r_p)
-    if faults.on("fresnel-average-amplitudes"):
-        r = dr.square(0.5 * (r_s + r_p))
+    r = faults.pick("fresnel-average-amplitudes", lambda: dr.square(0.5 * (r_s + r_p)),
+                    0.5 * (r_s * r_s + r_p * r_p))
     r = dr.select(tir, 1.0, r)
-    return dr.select(rel == 1, 0.0, r)
+    return faults.pick("schlick-for-exact", lambda: fresnel_schlick(cos_i, eta),
+                       dr.select(rel == 1, 0.0, r))
 
 
 def schlick_r0(eta):
@@ -86,8 +83,7 @@ def fresnel_schlick(cos_i, eta):
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
     cos_light = dr.select(rel >= 1, c, cos_t)
-    if faults.on("schlick-dense-side-cosine"):
-        cos_light = c
+    cos_light = faults.pick("schlick-dense-side-cosine", lambda: c, cos_light)
     r0 = schlick_r0(eta)
     r = r0 + (1 - r0) * (1 - cos_light) ** 5
     return dr.select(tir, 1.0, r)
@@ -99,9 +95,8 @@ def reflect(d, n):
     Law of reflection: angle of incidence equals angle of reflection, in the
     plane of d and n: r = d - 2 (d . n) n.
     """
-    if faults.on("reflect-sign"):
-        return d + 2 * dr.dot(d, n) * n
-    return d - 2 * dr.dot(d, n) * n
+    return faults.pick("reflect-sign", lambda: d + 2 * dr.dot(d, n) * n,
+                       d - 2 * dr.dot(d, n) * n)
 
 
 def refract(d, n, eta):
@@ -116,12 +111,11 @@ def refract(d, n, eta):
     cos_i = -dr.dot(d, n)
     c, rel = _sides(cos_i, eta)
     cos_t, tir = snell_cos_t(cos_i, eta)
-    if faults.on("snell-eta-inverted"):
-        rel = dr.rcp(rel)
-        cos_t, tir = _snell(c, rel)
-    n_facing = dr.select(cos_i >= 0, n, -n)
-    if faults.on("normal-not-flipped-inside"):
-        n_facing = n
+    rel, cos_t, tir = faults.pick("snell-eta-inverted",
+                                  lambda: (dr.rcp(rel), *_snell(c, dr.rcp(rel))),
+                                  (rel, cos_t, tir))
+    n_facing = faults.pick("normal-not-flipped-inside", lambda: n,
+                           dr.select(cos_i >= 0, n, -n))
     inv = dr.rcp(rel)
     t = inv * d + (inv * c - cos_t) * n_facing
     return t, tir
@@ -145,8 +139,7 @@ def fresnel_conductor(cos_i, eta, k):
     k = 0 gives the dielectric's R (below its critical angle); eta = 0, k = 1
     gives R = 1 at every angle (Mitsuba's ``material = "none"``).
     """
-    if faults.on("conductor-k-ignored"):
-        k = k * 0
+    k = faults.pick("conductor-k-ignored", lambda: k * 0, k)
     c = dr.minimum(dr.abs(cos_i), 1)
     c2 = c * c
     s2 = 1 - c2
@@ -173,9 +166,7 @@ def thin_slab_reflectance(r):
     transmittance is 1 - R' = (1 - R) / (1 + R); the ray leaves the slab along its
     own direction, the slab being thin.
     """
-    if faults.on("thin-slab-single-reflection"):
-        return r
-    return 2 * r / (1 + r)
+    return faults.pick("thin-slab-single-reflection", lambda: r, 2 * r / (1 + r))
 
 
 def fresnel_diffuse_reflectance(eta):
@@ -217,8 +208,6 @@ def plastic_diffuse(kd, f_i, f_o, eta, fdr_int, nonlinear):
     colour again (``nonlinear``, the saturating of wet or varnished
     surfaces). f = kd' (1 - F_i)(1 - F_o) / (eta^2 pi).
     """
-    if faults.on("plastic-no-internal-scattering"):
-        kd_eff = kd
-    else:
-        kd_eff = kd / (1 - dr.select(nonlinear, kd, 1.0) * fdr_int)
+    kd_eff = faults.pick("plastic-no-internal-scattering", lambda: kd,
+                         kd / (1 - dr.select(nonlinear, kd, 1.0) * fdr_int))
     return kd_eff * ((1 - f_i) * (1 - f_o) / (eta * eta * math.pi))

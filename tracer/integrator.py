@@ -613,8 +613,7 @@ class Integrator:
         # the surface along the geometric normal.
         cos_sh = -dr.dot(n_sh, b.d)
         nl = dr.select(cos_sh >= 0, n_sh, -n_sh)
-        if faults.on("backface-not-flipped"):
-            nl = n_sh
+        nl = faults.pick("backface-not-flipped", lambda: n_sh, nl)
         ng = dr.select(cos_o >= 0, n, -n)
         off = spawn_offset(p)
         if self.offset_scale != 1.0:
@@ -647,12 +646,12 @@ class Integrator:
         # spawn_ray_to does): with interpolated normals a lit direction can lie
         # behind the geometric surface near a shadow terminator.
         origin = dr.fma(dr.select(dr.dot(n, wi) >= 0, n, -n), off, p)
-        if faults.on("shadow-acne"):
-            origin = p   # no offset: the shadow ray may hit its own surface
+        # the bug: no offset, the shadow ray may hit its own surface
+        origin = faults.pick("shadow-acne", lambda: p, origin)
         d_shadow, length = light.shadow_ray(p, origin, wi, dist)
         tmax = length * (1 - SHADOW_EPSILON)
-        if faults.on("shadow-ray-past-light"):
-            tmax = dr.full(jit.Float, dr.inf, dr.width(p))
+        tmax = faults.pick("shadow-ray-past-light", lambda: dr.full(jit.Float, dr.inf, dr.width(p)),
+                           tmax)
         return (origin, d_shadow, tmax, active), b.weight * f * e * cos
 
     def _light_samples(self, b: _Batch, depth):

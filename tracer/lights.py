@@ -27,11 +27,9 @@ from whitted.tracer import faults
 
 def inverse_square(intensity, dist):
     """Irradiance-like factor I / r^2 of a point source at distance r (W/sr / m^2)."""
-    if faults.on("point-light-no-falloff"):
-        return intensity + 0 * dist
-    if faults.on("point-light-linear-falloff"):
-        return intensity / dist
-    return intensity / (dist * dist)
+    value = faults.pick("point-light-linear-falloff", lambda: intensity / dist,
+                        intensity / (dist * dist))
+    return faults.pick("point-light-no-falloff", lambda: intensity + 0 * dist, value)
 
 
 def point(p, position, intensity):
@@ -69,8 +67,7 @@ def spot(p, position, axis, intensity, cutoff_deg: float, beam_deg: float):
 
 def directional(p, direction, irradiance):
     """(wi, inf, E): light travelling along the unit ``direction``."""
-    if faults.on("directional-light-reversed"):
-        direction = -direction
+    direction = faults.pick("directional-light-reversed", lambda: -direction, direction)
     wi = -direction + dr.zeros(type(p), dr.width(p))
     return wi, dr.full(type(p.x), dr.inf, dr.width(p)), irradiance
 
@@ -97,18 +94,16 @@ def sphere_centre(p, origin, center, radius, value):
     # The near root -b - sqrt(disc); where rounding leaves no root (a grazing
     # origin), the distance to the tangent point.
     dist = -b - dr.sqrt(dr.maximum(disc, 0))
-    if faults.on("heckbert-light-inverse-square"):
-        value = value / (dc * dc)
+    value = faults.pick("heckbert-light-inverse-square", lambda: value / (dc * dc), value)
     return wi, dist, dr.select(dc > radius, value, 0)
 
 
 def lambert_cosine(n, wi):
     """Lambert's cosine law with clamping: max(n . wi, 0) for unit vectors."""
-    if faults.on("lambert-no-cosine"):
-        return dr.select(dr.dot(n, wi) > 0, 1.0, 0.0)
-    if faults.on("lambert-abs-cosine"):
-        return dr.abs(dr.dot(n, wi))
-    return dr.maximum(dr.dot(n, wi), 0)
+    value = faults.pick("lambert-abs-cosine", lambda: dr.abs(dr.dot(n, wi)),
+                        dr.maximum(dr.dot(n, wi), 0))
+    return faults.pick("lambert-no-cosine", lambda: dr.select(dr.dot(n, wi) > 0, 1.0, 0.0),
+                       value)
 
 
 # --------------------------------------------------------------------------------------
@@ -151,8 +146,7 @@ def sample_triangle(sample, p0, e1, e2):
     beta = 1 - sqrt(u1), gamma = u2 sqrt(u1) is uniform in area over the triangle.
     """
     su = dr.sqrt(sample.x)
-    if faults.on("triangle-warp-no-sqrt"):
-        su = sample.x
+    su = faults.pick("triangle-warp-no-sqrt", lambda: sample.x, su)
     return p0 + (1 - su) * e1 + (sample.y * su) * e2
 
 
@@ -178,10 +172,9 @@ def sample_cone(sample, cos_max, one_minus_cos_max=None):
     phi = 2 * math.pi * sample.y
     s, c = dr.sincos(phi)
     pdf = 1 / (2 * math.pi * omc)
-    if faults.on("area-pdf-sphere-cone"):
-        pdf = 1 / (math.pi * omc)
-    if faults.on("sphere-cone-disk-solid-angle"):
-        pdf = 1 / (math.pi * omc * (2 - omc))
+    pdf = faults.pick("area-pdf-sphere-cone", lambda: 1 / (math.pi * omc), pdf)
+    pdf = faults.pick("sphere-cone-disk-solid-angle", lambda: 1 / (math.pi * omc * (2 - omc)),
+                      pdf)
     return c * sin_t, s * sin_t, cos_t, pdf
 
 
@@ -203,8 +196,7 @@ def sample_uniform_direction(sample):
     z uniform in [-1, 1] is uniform by area): z = 1 - 2 u.y, phi = 2 pi u.x, as Mitsuba 3's
     ``square_to_uniform_sphere`` maps its sample (pbrt-v4, section A.5.2)."""
     z = 1 - 2 * sample.y
-    if faults.on("sphere-direction-z-squared"):
-        z = 1 - 2 * sample.y * sample.y
+    z = faults.pick("sphere-direction-z-squared", lambda: 1 - 2 * sample.y * sample.y, z)
     r = dr.sqrt(dr.maximum(1 - z * z, 0))
     s, c = dr.sincos(2 * math.pi * sample.x)
     return c * r, s * r, z
@@ -217,6 +209,5 @@ def spot_uv(x, y, z_tan):
     from whitted.tracer.backend import jit
 
     u, v = 0.5 * x / z_tan, 0.5 * y / z_tan
-    if faults.on("spot-uv-centred-at-zero"):
-        return jit.Array2f(u, v)
-    return jit.Array2f(0.5 + u, 0.5 + v)
+    return faults.pick("spot-uv-centred-at-zero", lambda: jit.Array2f(u, v),
+                       jit.Array2f(0.5 + u, 0.5 + v))

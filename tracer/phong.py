@@ -88,9 +88,8 @@ def _cos_power(c, exponent):
 def phong_lobe(n, wi, wo, exponent):
     """N(p) cos^p(alpha), alpha the angle between wo and the mirror direction of wi (no ks)."""
     cos_alpha = dr.dot(reflect_about(n, wi), wo)
-    if faults.on("phong-no-normalization"):
-        return _cos_power(cos_alpha, exponent)
-    return phong_normalization(exponent) * _cos_power(cos_alpha, exponent)
+    return faults.pick("phong-no-normalization", lambda: _cos_power(cos_alpha, exponent),
+                       phong_normalization(exponent) * _cos_power(cos_alpha, exponent))
 
 
 def blinn_phong_lobe(n, wi, wo, exponent):
@@ -99,11 +98,11 @@ def blinn_phong_lobe(n, wi, wo, exponent):
     Only called with both directions above the surface, where wi + wo != 0.
     """
     h = dr.normalize(wi + wo)
-    if faults.on("half-vector-unnormalized"):
-        h = wi + wo
-    if faults.on("blinn-phong-with-phong-normalization"):
-        return phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent)
-    return blinn_phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent)
+    h = faults.pick("half-vector-unnormalized", lambda: wi + wo, h)
+    return faults.pick(
+        "blinn-phong-with-phong-normalization",
+        lambda: phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent),
+        blinn_phong_normalization(exponent) * _cos_power(dr.dot(n, h), exponent))
 
 
 def phong_brdf(n, wi, wo, kd, ks, exponent, model: str):

@@ -96,9 +96,10 @@ def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int, seeds:
     inv = 1.0 / n
     film_x = jit.Float(px) + (jit.Float(sx) + 0.5) * inv
     film_y = jit.Float(py) + (jit.Float(sy) + 0.5) * inv
-    if faults.on("pixel-sample-corner"):
-        film_x = jit.Float(px) + jit.Float(sx) * inv
-        film_y = jit.Float(py) + jit.Float(sy) * inv
+    film_x, film_y = faults.pick(
+        "pixel-sample-corner",
+        lambda: (jit.Float(px) + jit.Float(sx) * inv, jit.Float(py) + jit.Float(sy) * inv),
+        (film_x, film_y))
     if seeds > 1:
         return pixel, s, film_x, film_y, k
     return pixel, s, film_x, film_y
@@ -133,10 +134,9 @@ def stratified_2d(pixel, s, n: int, dimension: int):
     h1 = pcg_hash(key ^ (s * 0x85EBCA6B + 0x68E31DA4))
     h2 = pcg_hash(h1 + 0x632BE5AB)
     inv = 1.0 / n
-    if faults.on("light-sample-same-uv"):
-        x = (jit.Float(cx) + uniform(h1)) * inv
-        return jit.Array2f(x, x)
-    return jit.Array2f((jit.Float(cx) + uniform(h1)) * inv, (jit.Float(cy) + uniform(h2)) * inv)
+    x = (jit.Float(cx) + uniform(h1)) * inv
+    return faults.pick("light-sample-same-uv", lambda: jit.Array2f(x, x),
+                       jit.Array2f(x, (jit.Float(cy) + uniform(h2)) * inv))
 
 
 def jitter_2d(pixel, s, seed: int):

@@ -16,8 +16,7 @@ def checkerboard(uv, scale, color0, color1):
     """
     u = uv.x * scale.x
     v = uv.y * scale.y
-    if faults.on("checkerboard-uv-swap"):
-        u, v = uv.y * scale.x, uv.x * scale.y
+    u, v = faults.pick("checkerboard-uv-swap", lambda: (uv.y * scale.x, uv.x * scale.y), (u, v))
     mu = (u - dr.floor(u)) > 0.5
     mv = (v - dr.floor(v)) > 0.5
     return dr.select(mu == mv, color0, color1)
@@ -50,8 +49,7 @@ def bitmap(uv, texels, offset, width, height, bilinear, mode, active):
     ``height`` are floats (exact for any image size below 2^24).
     """
     v = uv.y
-    if faults.on("bitmap-v-flipped"):
-        v = 1 - uv.y
+    v = faults.pick("bitmap-v-flipped", lambda: 1 - uv.y, v)
     x = uv.x * width
     y = v * height
     xb, yb = x - 0.5, y - 0.5
@@ -85,8 +83,7 @@ def latlong(d, texels, width: int, height: int):
     """
     u = dr.atan2(d.x, -d.z) * (0.5 / math.pi)
     v = dr.safe_acos(d.y) * (1 / math.pi)
-    if faults.on("latlong-z-not-negated"):
-        u = dr.atan2(d.x, d.z) * (0.5 / math.pi)
+    u = faults.pick("latlong-z-not-negated", lambda: dr.atan2(d.x, d.z) * (0.5 / math.pi), u)
     u = u - 0.5 / width
     u = u - dr.floor(u)
     x = u * width

@@ -412,7 +412,7 @@ def mutated_image(scene, fault_id: str | None, seed: int = 0, cache: Path | None
     img = _cached_image(path, shape) if tcache.folder(folder, top, create=False) else None
     if img is not None:
         return img, True
-    with faults.active(*([fault_id] if fault_id else [])):
+    with faults.active(*([fault_id] if fault_id else []), shared_kernel=True):
         img = np.asarray(Integrator(scene, seed=seed).render().image, dtype=np.float32)
     # An image that is not finite everywhere would be refused when read again.
     if img.shape == shape and np.isfinite(img).all() and tcache.folder(folder, top):

@@ -17,9 +17,9 @@ Python once (``dr.syntax`` loops and ``dr.if_stmt`` branches are traced, both si
 a branch), so a line that went into some kernel is a line coverage saw run, and one
 it did not see is in no kernel of any scene.
 
-Not counted: the blocks of ``if faults.on(...)`` (the formula bugs of
-:mod:`tracer.faults`, reached by ``whitted mutants``, whose sweep checks that every one
-is caught) and lines marked ``# pragma: no cover`` (none is).
+Not counted: the blocks of ``if faults.on(...)`` and the wrong values of
+``faults.pick(...)`` (the formula bugs of :mod:`tracer.faults`, reached by ``whitted
+mutants``, whose sweep checks that every one is caught) and lines marked ``# pragma: no cover`` (none is).
 
 The allow-list is keyed by file and a line's stripped text, or by a function's
 qualified name (every unreached line in it), never by line number, so that edits

@@ -56,10 +56,10 @@ def _functions(path: Path) -> dict[str, ast.AST]:
 
 
 def _switches(node: ast.AST) -> list[str]:
-    """The ids of the faults.on("id") calls inside a node."""
+    """The ids of the faults.on("id") and faults.pick("id", ...) calls inside a node."""
     return [c.args[0].value for c in ast.walk(node)
             if isinstance(c, ast.Call) and isinstance(c.func, ast.Attribute)
-            and c.func.attr == "on" and isinstance(c.func.value, ast.Name)
+            and c.func.attr in ("on", "pick") and isinstance(c.func.value, ast.Name)
             and c.func.value.id == "faults" and c.args
             and isinstance(c.args[0], ast.Constant)]
 

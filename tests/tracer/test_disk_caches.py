@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 
 from whitted.tracer import bvh, cache, meshio
-from whitted.tracer.meshio import load_mesh, write_ply
+from whitted.tracer.meshio import load_mesh
 
 
 @pytest.fixture
@@ -46,7 +46,8 @@ def _sphere_obj(path, n=12):
         for j in range(n):
             a, b = i * n + j + 1, i * n + (j + 1) % n + 1
             c, d = a + n, b + n
-            lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {d}/{d}/{d}", f"f {a}/{a}/{a} {d}/{d}/{d} {c}/{c}/{c}"]
+            lines += [f"f {a}/{a}/{a} {b}/{b}/{b} {d}/{d}/{d}",
+                      f"f {a}/{a}/{a} {d}/{d}/{d} {c}/{c}/{c}"]
     path.write_text("\n".join(lines) + "\n")
     return path
 

@@ -91,3 +91,40 @@ def test_recording_collects_the_switches_a_render_reaches():
     # No glass, area light, spot or mesh there: their switches are never asked about.
     assert not asked & {"schlick-for-exact", "area-pdf-disk", "spot-linear-falloff",
                         "barycentrics-swapped"}
+
+
+#: Bugs decided by faults.pick that reach glass_sphere (its catalog entries): each
+#: breaks a formula in another part of the tracer.
+PICKED = ("lambert-no-inv-pi", "shadow-acne", "point-light-linear-falloff",
+          "fresnel-average-amplitudes", "snell-eta-inverted", "camera-y-not-flipped",
+          "pixel-sample-corner")
+
+
+@pytest.mark.skipif("config.getoption('--backend') == 'cuda'", reason="LLVM IR")
+def test_bugs_decided_in_the_kernel_share_one_kernel_and_leave_the_clean_one_alone():
+    # issue 33: the formula-bug sweep compiled a kernel for each scene and bug; with
+    # shared_kernel the bug's number is an input of one kernel, not part of its IR.
+    clean = _kernels("glass_sphere")
+    shared = []
+    for fault_id in PICKED:
+        with faults.active(fault_id, shared_kernel=True):
+            shared.append(_kernels("glass_sphere"))
+    assert all(irs == shared[0] for irs in shared[1:])
+    assert shared[0] != clean
+    assert _kernels("glass_sphere") == clean
+
+
+def test_a_bug_decided_in_the_kernel_gives_the_image_of_the_python_switch():
+    # The same operations on the same numbers; only the compiler's choice of where to
+    # fuse a multiply and an add (one rounding, 2^-24 relative, fewer or more) may
+    # differ between the larger shared kernel and the switched one, a few roundings
+    # along a sample's path: 1e-5 relative bounds it with room, while every bug here
+    # changes the image by more than 1 % somewhere.
+    clean = _render("glass_sphere")
+    for fault_id in PICKED:
+        with faults.active(fault_id):
+            switched = _render("glass_sphere")
+        with faults.active(fault_id, shared_kernel=True):
+            shared = _render("glass_sphere")
+        assert np.abs(switched - clean).max() > 0.01, fault_id
+        np.testing.assert_allclose(shared, switched, rtol=1e-5, atol=1e-6, err_msg=fault_id)

@@ -106,7 +106,6 @@ class Emitter(base.Emitter):
         row = dr.zeros(jit.UInt32, dr.width(p))
         tex = self.texture.eval(row, jit.Array2f(uu, vv), inside)
         falloff = qz * qz * -dr.dot(self.normal, wi)     # z^2 cos_n = dist^2 cos_n^3
-        if faults.on("projector-distance-squared"):
-            falloff = dist * dist
+        falloff = faults.pick("projector-distance-squared", lambda: dist * dist, falloff)
         e = dr.select(inside, tex * (self.scale / falloff), 0)
         return wi, dr.norm(self.origin - origin), e

@@ -161,8 +161,7 @@ class BSDF(base.BSDF):
     def delta_lobes(self, prm, si):
         color, _, ks, kt, _, _, eta = prm
         t_dir, tir = fresnel.refract(si.d, si.ns, eta)
-        if faults.on("classic-reflection-tinted"):
-            ks = ks * color
+        ks = faults.pick("classic-reflection-tinted", lambda: ks * color, ks)
         return [(fresnel.reflect(si.d, si.ns), ks), (t_dir, dr.select(tir, 0.0, kt))]
 
     def emission_terms(self, prm, si):

@@ -77,12 +77,10 @@ class BSDF(base.BSDF):
         t_dir, tir = fresnel.refract(si.d, si.ns, eta)
         # Radiance crossing from n_i into n_t is scaled by (n_i / n_t)^2.
         n_ratio = dr.select(si.cos_i >= 0, dr.rcp(eta), eta)
-        if faults.on("inverted-eta2"):
-            n_ratio = dr.rcp(n_ratio)
-        if faults.on("no-eta2-scaling"):
-            n_ratio = dr.ones(type(n_ratio), dr.width(n_ratio))
-        t = 1 - r
-        if faults.on("no-fresnel-on-transmission"):
-            t = dr.ones(type(r), dr.width(r))
+        n_ratio = faults.pick("inverted-eta2", lambda: dr.rcp(n_ratio), n_ratio)
+        n_ratio = faults.pick("no-eta2-scaling",
+                              lambda: dr.ones(type(n_ratio), dr.width(n_ratio)), n_ratio)
+        t = faults.pick("no-fresnel-on-transmission", lambda: dr.ones(type(r), dr.width(r)),
+                        1 - r)
         transmitted = dr.select(tir, 0, t * n_ratio * n_ratio)
         return [(fresnel.reflect(si.d, si.ns), r), (t_dir, transmitted)]

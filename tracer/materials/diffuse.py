@@ -47,6 +47,4 @@ class BSDF(base.BSDF):
         return self.kd.eval(row, si.uv, active)
 
     def eval(self, kd, si, wi):
-        if faults.on("lambert-no-inv-pi"):
-            return kd
-        return kd * (1 / math.pi)
+        return faults.pick("lambert-no-inv-pi", lambda: kd, kd * (1 / math.pi))

@@ -116,8 +116,7 @@ class Closure:
         if self.opacity is not None:
             through = self.opacity < 1
             w_through = beta * (1 - self.opacity)
-            if faults.on("mask-passthrough-unweighted"):
-                w_through = beta
+            w_through = faults.pick("mask-passthrough-unweighted", lambda: beta, w_through)
             slots.append(Slot(self.si.d, dr.select(through, w_through, 0),
                               {"": through}, {"transmit": through}))
         return slots

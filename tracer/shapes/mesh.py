@@ -141,8 +141,7 @@ class Block(base.Block):
                 beta, gamma, dr.gather(jit.Array3f, self.vn, i0, mask),
                 dr.gather(jit.Array3f, self.vn, i1, mask),
                 dr.gather(jit.Array3f, self.vn, i2, mask))
-            if not faults.on("normal-not-renormalized"):
-                ns = dr.normalize(ns)
+            ns = faults.pick("normal-not-renormalized", lambda ns=ns: ns, dr.normalize(ns))
         if self.vt is not None:
             uv = tri_f.interpolate(beta, gamma, dr.gather(jit.Array2f, self.vt, i0, mask),
                                    dr.gather(jit.Array2f, self.vt, i1, mask),

@@ -45,8 +45,8 @@ def intersect(o, d, center, n, u_dual, v_dual, tmax):
     a = dr.dot(rel, u_dual)
     b = dr.dot(rel, v_dual)
     hit = (t > 0) & (t < tmax) & (dr.abs(a) <= 1) & (dr.abs(b) <= 1)
-    if faults.on("plane-hit-behind-ray"):
-        hit = (t < tmax) & (dr.abs(a) <= 1) & (dr.abs(b) <= 1)
+    hit = faults.pick("plane-hit-behind-ray",
+                      lambda: (t < tmax) & (dr.abs(a) <= 1) & (dr.abs(b) <= 1), hit)
     return t, hit, a, b
 
 

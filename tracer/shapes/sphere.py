@@ -42,8 +42,7 @@ def quadratic(o, d, center, radius, unit: bool = True):
     if unit:
         a = None
         disc = radius * radius - dr.squared_norm(f - b * d)
-        if faults.on("sphere-half-b-discriminant"):
-            disc = b * b - 4 * c
+        disc = faults.pick("sphere-half-b-discriminant", lambda: b * b - 4 * c, disc)
     else:
         a = dr.squared_norm(d)
         disc = a * (radius * radius - dr.squared_norm(f - (b / a) * d))
@@ -89,8 +88,8 @@ def nearest_fraction(o, d, center, radius):
     num = dr.select(frac, dr.abs(c), q_abs)
     den = dr.select(frac, q_abs, 1.0)
     rule = frac | q_pos   # the nearer root if it is > 0, else the farther one
-    if faults.on("sphere-near-root-from-inside"):
-        rule = frac & q_pos   # t = t0: only where both roots are > 0
+    # the bug: t = t0, only where both roots are > 0
+    rule = faults.pick("sphere-near-root-from-inside", lambda: frac & q_pos, rule)
     return num, den, (disc >= 0) & (q_abs > 0) & rule
 
 
@@ -226,8 +225,7 @@ class Block(base.TableBlock):
         p = dr.fma(d, t, o)
         n = dr.normalize(p - c)
         p = dr.fma(n, r, c)  # re-project onto the sphere: the error stays relative to r
-        if faults.on("unnormalized-normal"):
-            n = n * r   # the gradient p - c, not divided by r
+        n = faults.pick("unnormalized-normal", lambda: n * r, n)   # the gradient p - c
         # Local direction R^T n (columns of R are the local axes in world space).
         local = jit.Array3f(dr.dot(dr.gather(jit.Array3f, self.r0, k, mask), n),
                             dr.dot(dr.gather(jit.Array3f, self.r1, k, mask), n),

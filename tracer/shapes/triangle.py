@@ -151,8 +151,7 @@ def normal(e1, e2):
 
 def interpolate(beta, gamma, a0, a1, a2):
     """A vertex attribute at barycentrics (1 - beta - gamma, beta, gamma)."""
-    if faults.on("barycentrics-swapped"):
-        beta, gamma = gamma, beta
+    beta, gamma = faults.pick("barycentrics-swapped", lambda: (gamma, beta), (beta, gamma))
     return a0 * (1 - beta - gamma) + a1 * beta + a2 * gamma
 
 
