@@ -19,7 +19,8 @@ it did not see is in no kernel of any scene.
 
 Not counted: the blocks of ``if faults.on(...)`` and the wrong values of
 ``faults.pick(...)`` (the formula bugs of :mod:`tracer.faults`, reached by ``whitted
-mutants``, whose sweep checks that every one is caught) and lines marked ``# pragma: no cover`` (none is).
+mutants``, whose sweep checks that every one is caught) and lines marked ``# pragma: no
+cover`` (none is).
 
 The allow-list is keyed by file and a line's stripped text, or by a function's
 qualified name (every unreached line in it), never by line number, so that edits
