@@ -64,7 +64,9 @@ Render with the tracer; `-o` ending `.exr` (linear float32 RGB), `.png` (sRGB 8-
 as `%.0f`, no gamma, values above 255 not clamped). `--depth N` is Heckbert's DEPTH
 (trace calls), the same as `--max-depth N+1`. `--lpe` keeps only the light on paths
 matching a light-path expression. Never touches Mitsuba. Prints the rays traced per
-recursion level.
+recursion level. Large meshes are read, given vertex normals and a BVH once: the results
+are kept in `~/.cache/whitted` (checked data, [docs/safety.md](safety.md#caches)), so
+the next render of the same mesh skips that work.
 """,
     "reference": """\
 Render the converted scene on Mitsuba (`deterministic`: the harness's reference of

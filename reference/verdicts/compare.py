@@ -513,13 +513,15 @@ def largest_bilinear_texture(scene) -> int:
     (a material's or a spot's texture, an environment map); 0 without one."""
     import dataclasses
 
-    seen, best = set(), 0
+    seen, best = {}, 0
 
     def walk(x, depth=0):
         nonlocal best
         if x is None or depth > 6 or id(x) in seen:
             return
-        seen.add(id(x))
+        # keep x alive while the walk runs: an id is unique only among live objects, and a
+        # value made on the way (a property's) could free its id for a texture met later
+        seen[id(x)] = x
         texels = getattr(x, "texels", None)
         if isinstance(texels, np.ndarray) and texels.ndim >= 2:
             if getattr(x, "filter_type", "bilinear") == "bilinear":
