@@ -97,10 +97,16 @@ def _select(mask, a, b, dr):
     return dr.select(mask, a, b)
 
 
+_numbers: dict[str, int] = {}
+
+
 def _number(fault_id: str) -> int:
     """A bug's number in the kernel: its rank among the declared ids (fixed while a
     catalog is loaded, so that a kernel's constants do not depend on which bug is on)."""
-    return sorted(_declared).index(fault_id) if fault_id in _declared else len(_declared)
+    if len(_numbers) != len(_declared):
+        _numbers.clear()
+        _numbers.update((k, i) for i, k in enumerate(sorted(_declared)))
+    return _numbers.get(fault_id, len(_declared))
 
 
 def declare(ids: Iterable[str]) -> None:
