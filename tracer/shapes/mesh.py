@@ -96,8 +96,9 @@ class Block(base.Block):
 
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
-        self.bvh = shared_bvh(v[f[:, 0]], v[f[:, 1]], v[f[:, 2]])
-        n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        p0, p1, p2 = (np.take(v, f[:, k], axis=0) for k in range(3))
+        self.bvh = shared_bvh(p0, p1, p2)
+        n = np.cross(p1 - p0, p2 - p0)
         n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-30)
         self.face_n = base.v3(n)
         self.faces = base.uints(f.reshape(-1))
