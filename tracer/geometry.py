@@ -51,9 +51,8 @@ from whitted.tracer.shapes.sphere import Block as _SphereBlock  # noqa: F401 (te
 
 #: A group instanced this many times or more is searched through a hierarchy of its
 #: instances' boxes (:class:`_InstanceSetBlock`); fewer are unrolled one by one. From
-#: two on: one traversal loop instead of one per instance (bench_speed.py process's
-#: four placed 160,000-triangle tori, 640x480, 16 spp: a render 0.73-0.76 s unrolled
-#: against 0.63-0.67 s, measured in-process with a throwaway script).
+#: two on: one traversal loop instead of one per instance (``bench_speed.py process``
+#: prints the render's time of four placed tori; benchmarks/HISTORY.md, issue 33).
 INSTANCE_SET_MIN = 2
 
 
