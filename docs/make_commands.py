@@ -107,10 +107,10 @@ and Mitsuba's `dielectric` plugin; `fresnel.csv`, `fresnel.png`, `fresnel.json`.
 The harness's power check: every bug of the catalog (`reference/mutants.py`, 64
 plausible bugs in the lectures' formulas, the scene's reading, the XML importer and the
 image writer) switched into the tracer in turn and judged on every scene as `compare`
-judges it, and the importer's on Mitsuba's own reading of XML files; prints per bug the scenes whose verdict fails and by
-what margin; exit 0 when the tracer as written passes every scene and every bug is
-caught, 1 otherwise; `-o` writes `mutants.json` and `mutants.md` ([Formula bugs the
-comparison catches](mutants.md)).
+judges it, and the importer's on Mitsuba's own reading of XML files; prints per bug
+the scenes whose verdict fails and by what margin; exit 0 when the tracer as written
+passes every scene and every bug is caught, 1 otherwise; `-o` writes `mutants.json`
+and `mutants.md` ([Formula bugs the comparison catches](mutants.md)).
 """,
     "report": """\
 All of the above for every scene, the "imported" group (Mitsuba scenes imported and

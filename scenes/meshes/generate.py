@@ -73,7 +73,7 @@ def geosphere(levels: int = 2) -> tuple[np.ndarray, np.ndarray]:
     for _ in range(levels):
         index: dict = {}
 
-        def middle(a: int, b: int) -> int:
+        def middle(a: int, b: int, index: dict = index) -> int:
             key = (min(a, b), max(a, b))
             if key not in index:
                 m = (np.asarray(verts[a]) + np.asarray(verts[b])) / 2

@@ -71,7 +71,7 @@ def test_nearby_max_depths_share_the_stack_kernel():
     def kernels(max_depth):
         integ = Integrator(scene.with_overrides(max_depth=max_depth))
         assert integ.schedule == "stack"
-        integ.render()  # the first render and later ones may differ (benchmarks/HISTORY.md)
+        integ.render()  # (the first render and later ones now share their kernels too)
         return _hashes(integ.render)
 
     assert kernels(3) == kernels(8) == kernels(5)
