@@ -1114,9 +1114,9 @@ def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
                 return BVH(p0, p1, p2, arrays=arrays)
     bvh = BVH(p0, p1, p2)
     b = bvh.arrays
-    if cache.folder(folder) is not None and cache.write_bytes(entry, cache.pack_arrays(
-            {"lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right, "start": b.start,
-             "count": b.count, "order": b.order, "depth": np.array([b.depth])})):
+    if cache.folder(folder) is not None and cache.write_arrays(entry, {
+            "lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right, "start": b.start,
+            "count": b.count, "order": b.order, "depth": np.array([b.depth])}):
         cache.prune(folder, DISK_MAX_BYTES, keep=entry)
     return bvh
 

@@ -147,8 +147,9 @@ def read_bytes(path: Path, limit: int = 1 << 20) -> bytes | None:
     return data if len(data) <= limit else None
 
 
-def write_bytes(path: Path, data: bytes) -> bool:
-    """Store ``data`` as ``path``, mode 0600, through a temporary file and a rename.
+def write_bytes(path: Path, data) -> bool:
+    """Store ``data`` (bytes, or an iterable of byte chunks written one after another) as
+    ``path``, mode 0600, through a temporary file and a rename.
 
     The folder must have been accepted by :func:`folder`. False when it could
     not be written (a full or read-only disk): a cache only saves time.
@@ -163,7 +164,8 @@ def write_bytes(path: Path, data: bytes) -> bool:
     try:
         with os.fdopen(fd, "wb") as f:
             os.fchmod(f.fileno(), FILE_MODE)   # a file left by a killed process keeps its mode
-            f.write(data)
+            for chunk in ((data,) if isinstance(data, (bytes, bytearray)) else data):
+                f.write(chunk)
         os.replace(tmp, path)
         return True
     except OSError:
@@ -187,6 +189,20 @@ def pack_arrays(arrays: dict[str, np.ndarray]) -> bytes:
     """``arrays`` (name -> numeric array) as the bytes of one entry: the magic line,
     the length of a JSON table (8 bytes, little-endian) naming each array's dtype,
     shape and offset, the table, then each array's raw bytes in C order."""
+    return b"".join(_array_chunks(arrays))
+
+
+def write_arrays(path: Path, arrays: dict[str, np.ndarray]) -> bool:
+    """:func:`write_bytes` of :func:`pack_arrays`, each array written from its own memory
+    (no copy of the whole entry: a large BVH's arrays are hundreds of MB)."""
+    try:
+        chunks = _array_chunks(arrays)
+    except ValueError:
+        return False
+    return write_bytes(path, chunks)
+
+
+def _array_chunks(arrays: dict[str, np.ndarray]) -> list:
     table, parts, offset = {}, [], 0
     for name, a in arrays.items():
         a = np.ascontiguousarray(a)
@@ -195,10 +211,10 @@ def pack_arrays(arrays: dict[str, np.ndarray]) -> bytes:
         if dt.str not in ARRAY_DTYPES:
             raise ValueError(f"{name}: dtype {dt.str} cannot be kept in an arrays entry")
         table[name] = [dt.str, list(a.shape), offset]
-        parts.append(a.tobytes())
+        parts.append(memoryview(a).cast("B") if a.nbytes else b"")
         offset += a.nbytes
     head = json.dumps(table, separators=(",", ":")).encode()
-    return ARRAYS_MAGIC + len(head).to_bytes(8, "little") + head + b"".join(parts)
+    return [ARRAYS_MAGIC + len(head).to_bytes(8, "little") + head, *parts]
 
 
 def read_arrays(path: Path, expect: dict[str, str], optional: dict[str, str] | None = None,

@@ -318,8 +318,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
                 cache.touch(entry)
                 return n.copy()
     n = compute_vertex_normals(v, f)
-    if cache.folder(entry.parent) is not None and cache.write_bytes(
-            entry, cache.pack_arrays({"normals": n})):
+    if cache.folder(entry.parent) is not None and cache.write_arrays(entry, {"normals": n}):
         cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
     return n
 
@@ -333,7 +332,7 @@ def _disk_write(entry: Path, mesh: MeshData) -> None:
     arrays = {"vertices": mesh.vertices, "faces": np.asarray(mesh.faces, dtype=np.int64)}
     arrays.update({k: v for k, v in (("normals", mesh.normals), ("uvs", mesh.uvs))
                    if v is not None})
-    if cache.write_bytes(entry, cache.pack_arrays(arrays)):
+    if cache.write_arrays(entry, arrays):
         cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
 
 

@@ -291,6 +291,15 @@ def test_pack_arrays_refuses_objects_and_read_arrays_refuses_other_names(tmp_pat
     assert cache.read_arrays(path, {"x": "<f8"}, limit=16) is None
     path.write_bytes(b"\x93NUMPY" + path.read_bytes())
     assert cache.read_arrays(path, {"x": "<f8"}) is None
+    # written from each array's memory, the same bytes as pack_arrays
+    arrays = {"a": np.arange(5, dtype=np.int64)[::2], "b": np.zeros((0, 3)),
+              "c": np.ones((2, 3), np.float32)}
+    streamed = tmp_path / "s.arrays"
+    assert cache.write_arrays(streamed, arrays)
+    assert streamed.read_bytes() == cache.pack_arrays(arrays)
+    assert os.stat(streamed).st_mode & 0o777 == 0o600
+    assert not cache.write_arrays(tmp_path / "o.arrays", {"x": np.array([object()])})
+    assert not (tmp_path / "o.arrays").exists()
 
 
 def test_prune_keeps_the_cache_under_its_bound_dropping_the_least_recently_used(tmp_path):
