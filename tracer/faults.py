@@ -92,8 +92,10 @@ def pick(fault_id: str, buggy, correct):
 def _select(mask, a, b, dr):
     if isinstance(b, tuple):
         return tuple(_select(mask, x, y, dr) for x, y in zip(a, b, strict=True))
-    if isinstance(a, (int, float)) and isinstance(b, (int, float)):
-        a, b = float(a), float(b)
+    numbers = (int, float)
+    if (isinstance(a, numbers) and isinstance(b, numbers)
+            and not isinstance(a, bool) and not isinstance(b, bool)):
+        a, b = float(a), float(b)   # two Python numbers: a Float, not an Int, select
     return dr.select(mask, a, b)
 
 
