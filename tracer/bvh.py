@@ -65,7 +65,6 @@ times; ``benchmarks/bench_mesh.py`` times the render against Embree's.
 
 from __future__ import annotations
 
-import hashlib
 import time
 from collections import OrderedDict
 from dataclasses import dataclass
@@ -1046,23 +1045,23 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
     A process that builds one scene many times, as the formula-bug sweep does (a build
     for each of the 17 bugs that reach the mesh_knot scene), builds each tree once.
     A BVH is never changed after its build, so the tree is shared as it is. Kept: the
-    last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by the bytes of
+    last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by a SHA-256 of
     the corners and the backend. Its ``build_seconds`` stay those of its build.
     Trees of :data:`DISK_MIN_TRIANGLES` triangles or more are also kept on disk
     (:func:`_kept_on_disk`), for the next process.
     """
+    from whitted.tracer.cache import content_key
+
     p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
                   for p in (p0, p1, p2))
+    corners = content_key(p0, p1, p2)   # one hash of the corners serves both caches
     if len(p0) > RECENT_MAX_TRIANGLES:
-        return _kept_on_disk(p0, p1, p2)
-    h = hashlib.blake2b(backend.name().encode(), digest_size=20)
-    for p in (p0, p1, p2):
-        h.update(p.tobytes())
-    key = h.digest()
+        return _kept_on_disk(p0, p1, p2, corners)
+    key = (backend.name(), corners)
     if key in _RECENT:
         _RECENT.move_to_end(key)
         return _RECENT[key]
-    bvh = _RECENT[key] = _kept_on_disk(p0, p1, p2)
+    bvh = _RECENT[key] = _kept_on_disk(p0, p1, p2, corners)
     while len(_RECENT) > RECENT_COUNT:
         _RECENT.popitem(last=False)
     return bvh
@@ -1075,7 +1074,6 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
 DISK_MIN_TRIANGLES = 1 << 15
 #: The disk cache's bound, all trees together; the least recently used go first.
 DISK_MAX_BYTES = 2 << 30
-_SOURCE_DIGEST: str | None = None
 _ARRAY_KINDS = {"lo": "<f4", "hi": "<f4", "left": "<i8", "right": "<i8", "start": "<i8",
                 "count": "<i8", "order": "<i8", "depth": "<i8"}
 
@@ -1087,37 +1085,30 @@ def disk_folder():
     return cache.home() / "bvh"
 
 
-def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
+def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, corners: str) -> BVH:
     """``BVH(p0, p1, p2)``, its tree read from the disk cache when one was kept for the
-    same corners by the same builder (a SHA-256 of the corners' bytes and of this
-    module's source) and it passes :func:`valid_arrays`; else built, and kept."""
-    from pathlib import Path
-
+    same corners (``corners``: their :func:`tracer.cache.content_key`) by the same builder
+    (this module's source) and it passes :func:`valid_arrays`; else built, and kept."""
     from whitted.tracer import cache
 
     if len(p0) < DISK_MIN_TRIANGLES:
         return BVH(p0, p1, p2)
-    global _SOURCE_DIGEST
-    if _SOURCE_DIGEST is None:
-        _SOURCE_DIGEST = cache.content_key(Path(__file__).read_bytes())
-    folder = disk_folder()
-    entry = folder / f"{cache.content_key(_SOURCE_DIGEST, p0, p1, p2)}.arrays"
-    if cache.folder(folder, create=False) is not None:
-        t0 = time.perf_counter()
-        a = cache.read_arrays(entry, _ARRAY_KINDS)
-        if a is not None and a["depth"].shape == (1,):
-            arrays = BVHArrays(a["lo"], a["hi"], a["left"], a["right"], a["start"],
-                               a["count"], a["order"], int(a["depth"][0]),
-                               time.perf_counter() - t0)
-            if valid_arrays(arrays, p0, p1, p2):
-                cache.touch(entry)
-                return BVH(p0, p1, p2, arrays=arrays)
+    key = cache.content_key(cache.source_digest(__file__), corners)
+    entry = disk_folder() / f"{key}.arrays"
+    t0 = time.perf_counter()
+    a = cache.read_entry(entry, _ARRAY_KINDS)
+    if a is not None and a["depth"].shape == (1,):
+        arrays = BVHArrays(a["lo"], a["hi"], a["left"], a["right"], a["start"],
+                           a["count"], a["order"], int(a["depth"][0]),
+                           time.perf_counter() - t0)
+        if valid_arrays(arrays, p0, p1, p2):
+            cache.touch(entry)
+            return BVH(p0, p1, p2, arrays=arrays)
     bvh = BVH(p0, p1, p2)
     b = bvh.arrays
-    if cache.folder(folder) is not None and cache.write_arrays(entry, {
-            "lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right, "start": b.start,
-            "count": b.count, "order": b.order, "depth": np.array([b.depth])}):
-        cache.prune(folder, DISK_MAX_BYTES, keep=entry)
+    cache.keep_entry(entry, {"lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right,
+                             "start": b.start, "count": b.count, "order": b.order,
+                             "depth": np.array([b.depth])}, DISK_MAX_BYTES)
     return bvh
 
 

@@ -26,6 +26,7 @@ or the parent of a folder named by the user) are not checked.
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import io
 import json
@@ -272,6 +273,31 @@ def read_arrays(path: Path, expect: dict[str, str], optional: dict[str, str] | N
         out[name] = np.frombuffer(data, dtype=np.dtype(dtype), count=math.prod(shape),
                                   offset=offset).reshape(shape)
     return out
+
+
+def read_entry(path: Path, expect: dict[str, str], optional: dict[str, str] | None = None
+               ) -> dict[str, np.ndarray] | None:
+    """:func:`read_arrays` of an entry whose folder :func:`folder` accepts (never made
+    here), else None. The caller checks the values, then :func:`touch`es a hit."""
+    if folder(Path(path).parent, create=False) is None:
+        return None
+    return read_arrays(path, expect, optional)
+
+
+def keep_entry(path: Path, arrays: dict[str, np.ndarray], max_bytes: int) -> None:
+    """Store ``arrays`` at ``path`` (:func:`write_arrays`, its folder made and checked by
+    :func:`folder`), then :func:`prune` the folder to ``max_bytes``; a cache only saves
+    time, so a failure is silent."""
+    path = Path(path)
+    if folder(path.parent) is not None and write_arrays(path, arrays):
+        prune(path.parent, max_bytes, keep=path)
+
+
+@functools.cache
+def source_digest(file: str) -> str:
+    """:func:`content_key` of a module's source file, read once a process: part of the key
+    of what that module computes, so that another version's entries are never used."""
+    return content_key(Path(file).read_bytes())
 
 
 def content_key(*parts) -> str:

@@ -226,7 +226,6 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
 DISK_MIN_BYTES = 1 << 20
 #: The disk cache's bound, all meshes together; the least recently used go first.
 DISK_MAX_BYTES = 2 << 30
-_SOURCE_DIGEST: str | None = None
 
 
 def disk_folder() -> Path:
@@ -236,20 +235,10 @@ def disk_folder() -> Path:
     return cache.home() / "meshes"
 
 
-def _source_digest() -> str:
-    """A hash of this module's source: an entry parsed by another reader is never used."""
-    global _SOURCE_DIGEST
-    if _SOURCE_DIGEST is None:
-        from whitted.tracer.cache import content_key
-
-        _SOURCE_DIGEST = content_key(Path(__file__).read_bytes())
-    return _SOURCE_DIGEST
-
-
 def _disk_entry(path: Path, key: tuple) -> Path | None:
     """Where the parse of this file's bytes (with this flip option) is kept, or None when
     the file cannot be read whole or changed while it was hashed."""
-    from whitted.tracer.cache import content_key
+    from whitted.tracer.cache import content_key, source_digest
 
     try:
         with open(path, "rb") as fh:
@@ -259,7 +248,7 @@ def _disk_entry(path: Path, key: tuple) -> Path | None:
     if len(data) != key[3] or _identity(path) != key[:-1]:
         return None
     flip = {None: "default", True: "flip", False: "keep"}[key[-1]]
-    return disk_folder() / f"{content_key(_source_digest(), flip, data)}.arrays"
+    return disk_folder() / f"{content_key(source_digest(__file__), flip, data)}.arrays"
 
 
 _DISK_KINDS = {"vertices": "<f8", "faces": "<i8"}
@@ -274,9 +263,7 @@ def _disk_read(entry: Path) -> MeshData | None:
     """
     from whitted.tracer import cache
 
-    if cache.folder(entry.parent, create=False) is None:
-        return None
-    a = cache.read_arrays(entry, _DISK_KINDS, _DISK_OPTIONAL)
+    a = cache.read_entry(entry, _DISK_KINDS, _DISK_OPTIONAL)
     if a is None:
         return None
     v, f = a["vertices"], a["faces"]
@@ -307,19 +294,18 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     f = np.ascontiguousarray(faces, dtype=np.int64)
     if len(f) < DISK_MIN_FACES:
         return compute_vertex_normals(v, f)
-    entry = disk_folder() / f"{cache.content_key(_source_digest(), 'normals', v, f)}.arrays"
-    if cache.folder(entry.parent, create=False) is not None:
-        a = cache.read_arrays(entry, {"normals": "<f8"})
-        if a is not None and a["normals"].shape == v.shape:
-            n = a["normals"]
-            with np.errstate(invalid="ignore"):
-                unit = np.abs(_length(n) - 1.0) <= 1e-12
-            if unit.all():
-                cache.touch(entry)
-                return n.copy()
+    key = cache.content_key(cache.source_digest(__file__), "normals", v, f)
+    entry = disk_folder() / f"{key}.arrays"
+    a = cache.read_entry(entry, {"normals": "<f8"})
+    if a is not None and a["normals"].shape == v.shape:
+        n = a["normals"]
+        with np.errstate(invalid="ignore"):
+            unit = np.abs(_length(n) - 1.0) <= 1e-12
+        if unit.all():
+            cache.touch(entry)
+            return n.copy()
     n = compute_vertex_normals(v, f)
-    if cache.folder(entry.parent) is not None and cache.write_arrays(entry, {"normals": n}):
-        cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
+    cache.keep_entry(entry, {"normals": n}, DISK_MAX_BYTES)
     return n
 
 
@@ -327,13 +313,10 @@ def _disk_write(entry: Path, mesh: MeshData) -> None:
     """Keep ``mesh`` at ``entry``; a cache only saves time, so a failure is silent."""
     from whitted.tracer import cache
 
-    if cache.folder(entry.parent) is None:
-        return
     arrays = {"vertices": mesh.vertices, "faces": np.asarray(mesh.faces, dtype=np.int64)}
     arrays.update({k: v for k, v in (("normals", mesh.normals), ("uvs", mesh.uvs))
                    if v is not None})
-    if cache.write_arrays(entry, arrays):
-        cache.prune(entry.parent, DISK_MAX_BYTES, keep=entry)
+    cache.keep_entry(entry, arrays, DISK_MAX_BYTES)
 
 
 def _identity(path: Path) -> tuple:
