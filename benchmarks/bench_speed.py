@@ -34,6 +34,7 @@ whole Mitsuba process, cold and warm.
 from __future__ import annotations
 
 import argparse
+import contextlib
 import os
 import shutil
 import statistics
@@ -465,17 +466,29 @@ def _cold_and_warm(root: Path, quick: bool) -> tuple[float, float]:
     return cold, warm
 
 
+@contextlib.contextmanager
+def _baseline_tree(rev: str):
+    """A git worktree of commit ``rev``, removed afterwards: the baseline's report runs
+    there, with this environment's packages (through :func:`_import_root`), alternating
+    with this checkout's, so that both see the same drift of the machine."""
+    wt = Path(tempfile.mkdtemp(prefix="whitted-baseline-")) / "tree"
+    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt), rev],
+                   check=True, capture_output=True)
+    try:
+        yield wt
+    finally:
+        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
+                       capture_output=True)
+        shutil.rmtree(wt.parent, ignore_errors=True)
+
+
 def cmd_report_cold(args, rev: str) -> int:
     """Cold against warm, for this checkout and (--against) a baseline commit."""
-    roots = [(rev, ROOT)]
-    wt = None
-    if args.against:
-        wt = Path(tempfile.mkdtemp(prefix="whitted-baseline-")) / "tree"
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
-                        args.against], check=True, capture_output=True)
-        roots.insert(0, (args.against, wt))
     figures = {}
-    try:
+    with contextlib.ExitStack() as stack:
+        roots = [(rev, ROOT)]
+        if args.against:
+            roots.insert(0, (args.against, stack.enter_context(_baseline_tree(args.against))))
         for k in range(args.rounds if args.against else 1):
             for label, root in roots:
                 cold, warm = _cold_and_warm(root, args.quick)
@@ -483,11 +496,6 @@ def cmd_report_cold(args, rev: str) -> int:
                 print(f"  round {k + 1}: {label:<12} cold {cold:6.1f} s, warm {warm:6.1f} s, "
                       f"cold / warm {cold / warm:.2f} (target <= 2: "
                       f"{verdict(cold <= 2 * warm)})", flush=True)
-    finally:
-        if wt is not None:
-            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
-                           capture_output=True)
-            shutil.rmtree(wt.parent, ignore_errors=True)
     if args.against:
         ratios = [t[1] / b[1] for t, b in zip(figures[rev], figures[args.against],
                                               strict=True)]
@@ -511,12 +519,7 @@ def cmd_report(args) -> int:
         print("  target: half of the time measured at the baseline commit on the same "
               "machine (--against COMMIT measures both)")
         return 0
-    # The baseline's report in a git worktree of it, run with this environment's packages,
-    # alternating with this checkout's, so that both see the same drift of the machine.
-    wt = Path(tempfile.mkdtemp(prefix="whitted-baseline-")) / "tree"
-    subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt),
-                    args.against], check=True, capture_output=True)
-    try:
+    with _baseline_tree(args.against) as wt:
         times: dict[str, list[float]] = {"baseline": [], "this": []}
         for k in range(args.rounds):
             for name, root in (("baseline", wt), ("this", ROOT)):
@@ -525,10 +528,6 @@ def cmd_report(args) -> int:
                 label = args.against if name == "baseline" else rev
                 print(f"  round {k + 1}: {label:<12} {secs:6.1f} s, exit status {rc}, "
                       f"peak {mb(peak)}", flush=True)
-    finally:
-        subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
-                       capture_output=True)
-        shutil.rmtree(wt.parent, ignore_errors=True)
     ratios = [b / t for b, t in zip(times["baseline"], times["this"], strict=True)]
     print(f"  {args.against}'s time over this checkout's, round by round: "
           + ", ".join(f"{r:.2f}x" for r in ratios))

@@ -38,10 +38,11 @@ scenes where its switch is reached (:func:`tracer.faults.recording` while the
 tracer as written renders the scene: a switch never asked about cannot change
 the image). The bugs decided by ``faults.pick`` are rendered with the bug's
 number an input of the kernel (``faults.active(id, shared_kernel=True)``): one
-kernel a scene serves all of them, compiled once (a cold ``whitted report
---quick`` 320 s to 156 s, issue 33); a bug decided by ``faults.on`` (a scene
-read again, a spot's profile) still has kernels of its own. Dr.Jit keeps every
-kernel in its cache on disk.
+kernel a scene serves all of them, compiled once (with the kernels' scopes of issue
+33, a cold ``whitted report --quick`` went from 275-280 s to 144-151 s: ``python
+benchmarks/bench_speed.py report --quick --cold --against e2c9ff4``); a bug decided
+by ``faults.on`` (a scene read again, a spot's profile) still has kernels of its
+own. Dr.Jit keeps every kernel in its cache on disk.
 
 Adding a bug: one :class:`Mutant` entry in :data:`CATALOG` and one switch,
 ``faults.pick("id", ...)`` (or ``if faults.on("id")``), in the formula it breaks
