@@ -927,7 +927,7 @@ class Integrator:
             # numbering never merges its constants with those already alive (a light's
             # position, made when the Integrator was), which it did in the first chunk
             # only: the first chunk's kernel then differed from the others' and was
-            # compiled apart, about 0.3 s on a cold kernel cache (bench_speed.py process).
+            # compiled apart (issue 33; tests/tracer/test_kernel_cache.py checks it).
             backend.new_scope()
             count = min(per_chunk, total - first)
             lanes = count * spp * (1 if shared else S)
