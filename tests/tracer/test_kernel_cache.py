@@ -121,3 +121,31 @@ def test_host3_reads_an_array3f_without_a_kernel():
         dr.eval(v)
         assert _hashes(lambda v=v: host3(v)) == set()
         np.testing.assert_array_equal(host3(v), v.numpy().T)
+
+
+def _scene_names() -> list[str]:
+    from whitted.reference.cli import SCENES_DIR
+
+    return sorted(p.stem for p in SCENES_DIR.glob("*.toml"))
+
+
+@pytest.mark.parametrize("name", _scene_names())
+def test_every_light_samples_inside_the_kernel(name):
+    """Each light of each built-in scene, sampled at points not yet evaluated, traces
+    its sample into the kernel: no kernel runs and every output is a Dr.Jit value.
+    A numpy number times a Dr.Jit array is numpy's product, computed on the host: the
+    array is evaluated (a kernel), and Dr.Jit then uses numpy's memory, whose 64-byte
+    alignment, written into the shading kernel, changes by chance. The cylinder light
+    did so (its matrix's entries were numpy numbers): shape_lights' shading kernel got
+    another hash in most renders and LLVM compiled it again each time (issue 33)."""
+    backend.use()
+    integ = Integrator(load_scene(resolve_scene(name)).with_overrides(size=(16, 12), spp=1))
+    n = 8
+    p = jit.Array3f(dr.arange(jit.Float, n) * 0.1, dr.arange(jit.Float, n) * 0.2 + 0.5,
+                    dr.arange(jit.Float, n) * -0.3)
+    u = jit.Array2f(dr.arange(jit.Float, n) / n, dr.arange(jit.Float, n) / (n + 1))
+    for light in integ.illuminating:
+        out = []
+        assert _launches(lambda light=light: out.extend(light.sample(p, p, u))) == [], light
+        for x in out:
+            assert isinstance(x, (int, float)) or dr.is_jit_v(x), (light, type(x))

@@ -153,19 +153,21 @@ class Sampler:
         a = m[:3, :3]
         r, length = float(np.linalg.norm(a[:, 0])), float(np.linalg.norm(a[:, 2]))
         self.area = 2 * math.pi * r * length
-        self.m = a
-        self.t = m[:3, 3]
-        self.nm = np.linalg.inv(a).T
+        # Python floats, written into the kernel: a numpy scalar times a Dr.Jit array
+        # would be computed by numpy, on the host (tests/tracer/test_kernel_cache.py)
+        self.m = a.tolist()
+        self.t = m[:3, 3].tolist()
+        self.nm = np.linalg.inv(a).T.tolist()
 
     def sample(self, radiance, p, origin, u):
         s, c = dr.sincos(2 * math.pi * u.y)
         z = u.x
         m, t, nm = self.m, self.t, self.nm
-        y = jit.Array3f(m[0, 0] * c + m[0, 1] * s + m[0, 2] * z + t[0],
-                        m[1, 0] * c + m[1, 1] * s + m[1, 2] * z + t[1],
-                        m[2, 0] * c + m[2, 1] * s + m[2, 2] * z + t[2])
-        n = dr.normalize(jit.Array3f(nm[0, 0] * c + nm[0, 1] * s, nm[1, 0] * c + nm[1, 1] * s,
-                                     nm[2, 0] * c + nm[2, 1] * s))
+        y = jit.Array3f(m[0][0] * c + m[0][1] * s + m[0][2] * z + t[0],
+                        m[1][0] * c + m[1][1] * s + m[1][2] * z + t[1],
+                        m[2][0] * c + m[2][1] * s + m[2][2] * z + t[2])
+        n = dr.normalize(jit.Array3f(nm[0][0] * c + nm[0][1] * s, nm[1][0] * c + nm[1][1] * s,
+                                     nm[2][0] * c + nm[2][1] * s))
         to_y = y - p
         dist = dr.norm(to_y)
         wi = to_y / dist
