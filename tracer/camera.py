@@ -39,6 +39,16 @@ M, so that its rays start at M (x, y, near_clip) and run along M's +z.
 Orthographic: all rays are parallel to f; the view is ``width`` wide in
 world units and width / aspect high, and a ray starts at
 origin + (2u - 1) width/2 r + (1 - 2v) width/2 / aspect up' + near_clip f.
+
+The camera's numbers and the film's size enter the kernel as opaque values
+(:func:`_number`), not as constants written into it: one compiled kernel then
+serves a scene at every film size and every pixel offset (a quick report renders
+each scene at three sizes, LuxCore's vote at eight offsets; issue 33;
+tests/tracer/test_kernel_cache.py). A division by such a number is written as
+the product with its float32 reciprocal, which is what Dr.Jit makes of a
+division by a constant: the operations are those of the constants' kernel,
+though LLVM, no longer folding the constants, may round a value differently
+in its last bit.
 """
 
 import math
@@ -64,8 +74,18 @@ def frame(camera: Camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return r, np.cross(r, f), f
 
 
+def _number(x):
+    """A float32 kernel input of value ``x``, not written into the kernel (see above)."""
+    return dr.opaque(jit.Float, float(x))
+
+
+def _reciprocal(x):
+    """1 / x as Dr.Jit divides by a constant: the float32 reciprocal of float32(x)."""
+    return _number(np.float32(1) / np.float32(x))
+
+
 def _vec(v):
-    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+    return jit.Array3f(*(_number(v[k]) for k in range(3)))
 
 
 def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
@@ -76,31 +96,34 @@ def generate_rays(camera: Camera, width: int, height: int, film_x, film_y):
     ppx, ppy = camera.principal_point
     dx, dy = dx + ppx * width, dy + ppy * height
     if dx or dy:
-        film_x, film_y = film_x + dx, film_y + dy
-    sx = 2 * (film_x / width) - 1          # -1 left .. +1 right
-    sy = 1 - 2 * (film_y / height)         # +1 top .. -1 bottom
-    sy = faults.pick("camera-y-not-flipped", lambda: 2 * (film_y / height) - 1, sy)
+        film_x, film_y = film_x + _number(dx), film_y + _number(dy)
+    inv_w, inv_h, inv_aspect = _reciprocal(width), _reciprocal(height), _reciprocal(aspect)
+    sx = 2 * (film_x * inv_w) - 1          # -1 left .. +1 right
+    sy = 1 - 2 * (film_y * inv_h)          # +1 top .. -1 bottom
+    sy = faults.pick("camera-y-not-flipped", lambda: 2 * (film_y * inv_h) - 1, sy)
     eye = _vec(camera.origin)
+    near, far = _number(camera.near_clip), _number(camera.far_clip)
     if camera.type == "perspective":
-        tan_half = math.tan(math.radians(camera.fov_x(aspect)) / 2)
-        d = f + (sx * tan_half) * r + (sy * tan_half / aspect) * up
+        tan_half = _number(math.tan(math.radians(camera.fov_x(aspect)) / 2))
+        d = f + (sx * tan_half) * r + (sy * tan_half * inv_aspect) * up
         d = faults.pick("fov-vertical-for-horizontal",
-                        lambda: f + (sx * tan_half * aspect) * r + (sy * tan_half) * up, d)
+                        lambda: f + (sx * tan_half * _number(aspect)) * r
+                        + (sy * tan_half) * up, d)
         length = dr.norm(d)               # = 1 / cos(angle to the axis)
         d = d / length
-        near_t = camera.near_clip * length
+        near_t = near * length
         o = eye + d * near_t
-        tmax = camera.far_clip * length - near_t
+        tmax = far * length - near_t
     elif camera.matrix is not None:
         m = np.asarray(camera.matrix, dtype=np.float64)
         left, top, ahead = (_vec(m[:3, i]) for i in range(3))
-        o = eye - sx * left + (sy / aspect) * top + camera.near_clip * ahead
+        o = eye - sx * left + (sy * inv_aspect) * top + near * ahead
         d = dr.normalize(ahead) + dr.zeros(jit.Array3f, dr.width(film_x))
-        tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))
+        tmax = _number(camera.far_clip - camera.near_clip) + dr.zeros(jit.Float, dr.width(film_x))
     else:
-        half = camera.width / 2
-        half = faults.pick("ortho-width-as-half", lambda: camera.width, half)
-        o = eye + (sx * half) * r + (sy * half / aspect) * up + camera.near_clip * f
+        half = _number(camera.width / 2)
+        half = faults.pick("ortho-width-as-half", lambda: _number(camera.width), half)
+        o = eye + (sx * half) * r + (sy * half * inv_aspect) * up + near * f
         d = f + dr.zeros(jit.Array3f, dr.width(film_x))
-        tmax = dr.full(jit.Float, camera.far_clip - camera.near_clip, dr.width(film_x))
+        tmax = _number(camera.far_clip - camera.near_clip) + dr.zeros(jit.Float, dr.width(film_x))
     return o, d, tmax

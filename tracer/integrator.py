@@ -436,7 +436,8 @@ class Integrator:
         L.commit()
         total = dr.sum(tally)
         if narrow:  # shadow rays in the high bits; all rays matter
-            total = (jit.UInt64(total) << 32) | (n * len(bs))
+            # (the count an input, so that every film size shares this small kernel)
+            total = (jit.UInt64(total) << 32) | dr.opaque(jit.UInt64, n * len(bs))
         return (None if children is None else _compact(children)), total
 
     def _shade(self, bs: list, depth, active=True, limit=None) -> tuple[list, list,

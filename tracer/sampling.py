@@ -89,8 +89,10 @@ def pixel_samples(width: int, n: int, first_pixel: int, pixel_count: int, seeds:
         pixel, s = pixel_and_sample(idx, spp, first_pixel)
     else:
         pixel, s, k = pixel_seed_and_sample(idx, spp, seeds, first_pixel)
-    px = pixel % width
-    py = pixel // width
+    # the width an input of the kernel, not a constant in it (tracer/camera.py)
+    w = dr.opaque(jit.UInt32, width)
+    py = pixel // w
+    px = pixel - py * w
     sy = s // n
     sx = s - sy * n
     inv = 1.0 / n

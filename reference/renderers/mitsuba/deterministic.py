@@ -266,7 +266,8 @@ class DeterministicReference:
         image = np.zeros((total, 3), dtype=np.float32)
         rays = [0] * scene.film.max_depth
         start = time.perf_counter()
-        scale = mi.ScalarPoint2f(1 / W, 1 / H)
+        # inputs of the kernel, not constants in it: one kernel at every film size
+        scale = mi.Point2f(dr.opaque(mi.Float, 1 / W), dr.opaque(mi.Float, 1 / H))
         for first in range(0, total, per_chunk):
             count = min(per_chunk, total - first)
             pixel, s, fx, fy = pixel_samples(W, n, first, count)
