@@ -28,7 +28,9 @@ calls the wrong value's function only when its bug is on, so it traces the
 same operations as that ``if``. Inside ``active(id, shared_kernel=True)``
 (the formula-bug sweep) a :func:`pick` is decided in the kernel instead, by
 the bug's number, an input of the kernel that is not written into its IR:
-every bug so decided shares one kernel, compiled once a scene. A switch
+every bug so decided shares one kernel, compiled once a scene; the scene's
+numbers enter that kernel as inputs too (:func:`number`), so that a scene read
+again with a bug of its placements shares it as well. A switch
 decided where a scene is prepared (an emitter's area, an instance's normal
 matrix) holds for Integrators built while it is on.
 
@@ -87,6 +89,21 @@ def pick(fault_id: str, buggy, correct):
 
         return _select(_selector == _number(fault_id), buggy(), correct, dr)
     return buggy() if fault_id in _active else correct
+
+
+def number(x):
+    """A number of the scene (a position, a matrix entry, a radius, an area) as the
+    kernel takes it: a Python float, written into the kernel, as the tracer is written;
+    inside :func:`active` with ``shared_kernel`` an opaque jit.Float, an input of the
+    kernel, so that the scene read again with a bug of its placement (the catalog's
+    "parse" stage: a rotation turned the wrong way, steps composed in reverse) shares
+    the sweep's one kernel a scene instead of compiling its own (issue 33)."""
+    if _selector is None:
+        return float(x)
+    import drjit as dr
+
+    from whitted.tracer.backend import jit
+    return dr.opaque(jit.Float, float(x))
 
 
 def _select(mask, a, b, dr):

@@ -128,3 +128,34 @@ def test_a_bug_decided_in_the_kernel_gives_the_image_of_the_python_switch():
             shared = _render("glass_sphere")
         assert np.abs(switched - clean).max() > 0.01, fault_id
         np.testing.assert_allclose(shared, switched, rtol=1e-5, atol=1e-6, err_msg=fault_id)
+
+
+@pytest.mark.skipif("config.getoption('--backend') == 'cuda'", reason="LLVM IR")
+@pytest.mark.parametrize("name, fault_id", [("glass_sphere", "rotation-sign-flipped"),
+                                            ("shape_lights", "rotation-sign-flipped"),
+                                            ("whitted_mix", "steps-composed-in-reverse")])
+def test_a_scene_read_again_with_a_placement_bug_shares_the_sweeps_kernel(name, fault_id):
+    # issue 33: inside the sweep (shared_kernel) the scene's numbers are inputs of the
+    # kernel (faults.number), so the scene read again with a bug of its placements
+    # (its rotations turned or composed otherwise: other numbers, the same shapes)
+    # runs the kernel that every other bug of the scene runs. Before, each such
+    # reading compiled its own: 55 kernels, 11 s of LLVM in a cold quick sweep.
+    scene = load_scene(SCENES / f"{name}.toml").with_overrides(size=(16, 12), spp=4)
+    with faults.active(fault_id):
+        moved = load_scene(SCENES / f"{name}.toml").with_overrides(size=(16, 12), spp=4)
+    assert moved.shapes != scene.shapes or moved.lights != scene.lights
+    with faults.active(fault_id, shared_kernel=True):
+        assert _shading_kernel(moved) == _shading_kernel(scene)
+
+
+def _shading_kernel(scene) -> str:
+    """The hash of the largest kernel a render launches: its shading kernel (a moved mesh
+    builds its own BVH first, in kernels of its own)."""
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()
+    try:
+        Integrator(scene).render()
+        return max((k["operation_count"], k["hash"]) for k in dr.kernel_history()
+                   if k["type"] == dr.KernelType.JIT and "hash" in k)[1]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)

@@ -48,6 +48,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
+from whitted.tracer import faults
 from whitted.tracer.backend import jit
 
 
@@ -99,8 +100,9 @@ class Emitter:
 
 
 def vec(v) -> Any:
-    """A constant 3-vector (position, direction) written into the kernel."""
-    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+    """A constant 3-vector (position, direction) written into the kernel (an input of it
+    in the formula-bug sweep: :func:`tracer.faults.number`)."""
+    return jit.Array3f(*(faults.number(v[k]) for k in range(3)))
 
 
 def color(c) -> Any:

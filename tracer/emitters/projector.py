@@ -96,7 +96,8 @@ class Emitter(base.Emitter):
 
     def sample(self, p, origin, u):
         inv = self.inverse    # p in the projector's frame: q = to_world^-1 p
-        qx, qy, qz = (dr.dot(base.vec(inv[r, :3]), p) + float(inv[r, 3]) for r in range(3))
+        qx, qy, qz = (dr.dot(base.vec(inv[r, :3]), p) + faults.number(inv[r, 3])
+                      for r in range(3))
         to_light = self.origin - p
         dist = dr.norm(to_light)
         wi = to_light / dist

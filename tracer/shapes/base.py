@@ -35,7 +35,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from whitted.tracer import backend
+from whitted.tracer import backend, faults
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
 from whitted.tracer.settings import Table, read_steps
 
@@ -129,16 +129,18 @@ def uints(values) -> object:
 
 
 def const3(v) -> object:
-    """A constant 3-vector written into the kernel."""
-    return jit.Array3f(float(v[0]), float(v[1]), float(v[2]))
+    """A constant 3-vector written into the kernel (an input of it in the formula-bug
+    sweep: :func:`tracer.faults.number`)."""
+    return jit.Array3f(*(faults.number(v[k]) for k in range(3)))
 
 
 def affine(m: np.ndarray, p, point: bool = True):
     """The 4x4 (or 3x3) matrix m, as kernel constants, applied to a point or a vector."""
-    rows = [jit.Array3f(float(m[r, 0]), float(m[r, 1]), float(m[r, 2])) for r in range(3)]
+    rows = [const3(m[r, :3]) for r in range(3)]
     x, y, z = (dr.dot(row, p) for row in rows)
     if point:
-        x, y, z = x + float(m[0, 3]), y + float(m[1, 3]), z + float(m[2, 3])
+        x, y, z = (x + faults.number(m[0, 3]), y + faults.number(m[1, 3]),
+                   z + faults.number(m[2, 3]))
     return jit.Array3f(x, y, z)
 
 
@@ -205,9 +207,9 @@ class TableBlock(Block):
         for name in self.fields:
             a = getattr(self, name).numpy()
             if a.ndim == 1:
-                self.const[name] = [float(x) for x in a]
+                self.const[name] = [faults.number(x) for x in a]
             else:
-                self.const[name] = [jit.Array3f(*(float(x) for x in col)) for col in a.T]
+                self.const[name] = [const3(col) for col in a.T]
 
     def get(self, name, i, active=True):
         if isinstance(i, int):
@@ -322,7 +324,8 @@ class FlatSampler:
         dist = dr.norm(to_y)
         wi = to_y / dist
         cos_l = -dr.dot(self.n, wi)  # front side emits: the light's normal faces p
-        value = dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
+        area = faults.number(self.area)
+        value = dr.select(cos_l > 0, radiance * (cos_l * area / (dist * dist)), 0)
         return wi, dist, value
 
     @staticmethod

@@ -18,6 +18,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from whitted.tracer import faults
 from whitted.tracer import transform as tf
 from whitted.tracer.backend import deferred, jit
 from whitted.tracer.settings import Matrix, Table, Vec3, as_tuple, check_transform
@@ -153,11 +154,14 @@ class Sampler:
         a = m[:3, :3]
         r, length = float(np.linalg.norm(a[:, 0])), float(np.linalg.norm(a[:, 2]))
         self.area = 2 * math.pi * r * length
-        # Python floats, written into the kernel: a numpy scalar times a Dr.Jit array
-        # would be computed by numpy, on the host (tests/tracer/test_kernel_cache.py)
-        self.m = a.tolist()
-        self.t = m[:3, 3].tolist()
-        self.nm = np.linalg.inv(a).T.tolist()
+        # Python floats, written into the kernel (inputs of it in the formula-bug sweep,
+        # faults.number): a numpy scalar times a Dr.Jit array would be numpy's product,
+        # computed on the host (tests/tracer/test_kernel_cache.py)
+        def numbers(rows):
+            return [[faults.number(x) for x in row] for row in rows]
+
+        self.m, self.nm = numbers(a), numbers(np.linalg.inv(a).T)
+        self.t = numbers([m[:3, 3]])[0]
 
     def sample(self, radiance, p, origin, u):
         s, c = dr.sincos(2 * math.pi * u.y)
@@ -172,6 +176,7 @@ class Sampler:
         dist = dr.norm(to_y)
         wi = to_y / dist
         cos_l = -dr.dot(n, wi)
-        return wi, dist, dr.select(cos_l > 0, radiance * (cos_l * self.area / (dist * dist)), 0)
+        area = faults.number(self.area)
+        return wi, dist, dr.select(cos_l > 0, radiance * (cos_l * area / (dist * dist)), 0)
 
     shadow_ray = staticmethod(base.FlatSampler.shadow_ray)

@@ -241,7 +241,7 @@ class Sampler:
     aim = (0.0, 0.0)  # the cone's axis: towards the centre
 
     def __init__(self, shape):
-        self.center, self.radius = base.const3(shape.center), float(shape.radius)
+        self.center, self.radius = base.const3(shape.center), faults.number(shape.radius)
 
     def sample(self, radiance, p, origin, u):
         to_c = self.center - p
