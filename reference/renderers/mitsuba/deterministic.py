@@ -230,7 +230,10 @@ class DeterministicReference:
                     w = beta * weight
                     keep &= dr.max(w) > 0
                     children.append((si.spawn_ray(wo), w, keep))
-        dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, slot)
+        # Direct: atomic adds, as the tracer's; the default on the CPU (Expand) adds into
+        # a copy of L per thread and writes L's size into the kernel, so that each
+        # film size compiled its own (issue 33)
+        dr.scatter_reduce(dr.ReduceOp.Add, L, contrib, slot, mode=dr.ReduceMode.Direct)
         if not children:
             dr.eval(L)
             return None
@@ -273,6 +276,10 @@ class DeterministicReference:
             pixel, s, fx, fy = pixel_samples(W, n, first, count)
             film = mi.Point2f(mi.Float(fx), mi.Float(fy)) * scale
             ray, weight = self.sensor.sample_ray(0.0, 0.5, film, mi.Point2f(0.5, 0.5))
+            # Mitsuba's sensor writes the film's size into its kernel: evaluated apart,
+            # so that the kernels of the ray trees do not, and one compile of them
+            # serves every size the report renders a scene at (issue 33)
+            dr.eval(ray, weight)
             L = dr.zeros(mi.Color3f, count * spp)
             slot = dr.arange(mi.UInt32, count * spp)
             beta = mi.Color3f(weight)
