@@ -28,9 +28,9 @@ home = Path(os.environ.get("HOME", "~")).expanduser()
 os.environ.setdefault("DRJIT_CACHE_DIR", str(home / ".drjit"))
 os.environ.setdefault("XDG_CACHE_HOME", str(home / ".cache"))
 
-import drjit as dr  # noqa: E402
+from whitted import tracer  # noqa: E402,F401,I001  (chooses libLLVM before drjit loads)
 
-from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+import drjit as dr  # noqa: E402
 
 
 def picked_ids() -> set[str]:
