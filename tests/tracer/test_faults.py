@@ -139,7 +139,8 @@ def test_a_scene_read_again_with_a_placement_bug_shares_the_sweeps_kernel(name, 
     # kernel (faults.number), so the scene read again with a bug of its placements
     # (its rotations turned or composed otherwise: other numbers, the same shapes)
     # runs the kernel that every other bug of the scene runs. Before, each such
-    # reading compiled its own: 55 kernels, 11 s of LLVM in a cold quick sweep.
+    # reading compiled its own: 67 kernels, 11.8 s of LLVM in a cold quick sweep
+    # (benchmarks/bench_kernels.py; benchmarks/HISTORY.md).
     scene = load_scene(SCENES / f"{name}.toml").with_overrides(size=(16, 12), spp=4)
     with faults.active(fault_id):
         moved = load_scene(SCENES / f"{name}.toml").with_overrides(size=(16, 12), spp=4)
