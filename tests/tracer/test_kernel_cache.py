@@ -146,7 +146,11 @@ def test_every_light_samples_inside_the_kernel(name):
     u = jit.Array2f(dr.arange(jit.Float, n) / n, dr.arange(jit.Float, n) / (n + 1))
     for light in integ.illuminating:
         out = []
-        assert _launches(lambda light=light: out.extend(light.sample(p, p, u))) == [], light
+
+        def sample(light=light, out=out):
+            out.extend(light.sample(p, p, u))
+
+        assert _launches(sample) == [], light
         for x in out:
             assert isinstance(x, (int, float)) or dr.is_jit_v(x), (light, type(x))
 
