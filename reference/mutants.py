@@ -752,13 +752,16 @@ class SweepResult:
 def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: bool = True,
           log: Callable[[str], None] = print,
           between: Callable[[], None] | None = None,
-          xml_sources: list[tuple[str, Path]] = ()) -> SweepResult:
+          xml_sources: list[tuple[str, Path]] = (), last_first: bool = False) -> SweepResult:
     """Judge the tracer as written and with each bug on every scene (module docstring).
 
     ``xml_sources``: (name, path) of Mitsuba XML files judged by the structure verdict
     alone (:func:`structure_sources`), after the scenes. ``between()``, when given, is
     called before each scene and each bug's judgement (``whitted report``:
-    reference.renderers.luxcore.render.SharedCores.poll)."""
+    reference.renderers.luxcore.render.SharedCores.poll). ``last_first``: judge the
+    scenes from the last to the first (the quick report's worker, beside the comparisons,
+    which go from the first: reference.report.sweep_worker); the result is the same, its
+    lists in the given order."""
     import shutil
     import tempfile
 
@@ -789,7 +792,11 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
                 for path, scene, read_asked in scenes]
         jobs += [(name, (0, 0), 0, lambda n=name, x=xml: [xml_unit(n, x)], frozenset(), None)
                  for name, xml in xml_sources]
-        for i, (name, size, spp, make_units, read_asked, reread) in enumerate(jobs, 1):
+        outcomes: dict[int, list] = {}   # job index -> (bug id, outcome) in judging order
+        order = range(len(jobs) - 1, -1, -1) if last_first else range(len(jobs))
+        for done, j in enumerate(order, 1):
+            name, size, spp, make_units, read_asked, reread = jobs[j]
+            outcomes[j] = []
             t0 = time.perf_counter()
             if between is not None:
                 between()
@@ -798,37 +805,41 @@ def sweep(scene_paths: list[Path], mutants: list[Mutant] | None = None, quick: b
             reached = frozenset().union(*(u.reached for u in units), read_asked)
             todo = [m for m in mutants if m.id in reached]
             for m in todo:
-                r = results[m.id]
                 if between is not None:
                     between()
                 t1 = time.perf_counter()
                 outcome = _judge_mutant(m, units, reread)
-                r.seconds += time.perf_counter() - t1
+                results[m.id].seconds += time.perf_counter() - t1
                 if isinstance(outcome, Catch):
                     outcome.scene = name
-                    r.caught_by.append(outcome)
-                elif outcome == "blind":
-                    r.blind.append(name)
-                elif outcome.startswith("error"):
-                    r.errors.append(f"{name}: {outcome}")
-                else:
-                    r.passed.append(name)
+                outcomes[j].append((m.id, outcome))
             seconds = time.perf_counter() - t0
-            scenes_out.append(SceneResult(
+            scenes_out.append((j, SceneResult(
                 name, size, spp,
                 [{"verdict": u.label, "reference": u.reference, "test": u.test,
                   "pass": u.clean_passed, "margin": u.clean_margin, "check": u.clean_check}
-                 for u in units], clean, seconds))
-            caught = sum(1 for m in todo if any(c.scene == name
-                                                for c in results[m.id].caught_by))
-            log(f"[{i}/{total}] {name:<22} tracer as written: "
+                 for u in units], clean, seconds)))
+            caught = sum(1 for _, o in outcomes[j] if isinstance(o, Catch))
+            log(f"[{done}/{total}] {name:<22} tracer as written: "
                 f"{'pass' if clean else 'FAIL'} "
                 f"(margin {max(u.clean_margin for u in units):.2f}); "
                 f"{len(todo)} mutants reach it, {caught} caught ({seconds:.1f} s)")
     finally:
         shutil.rmtree(workdir, ignore_errors=True)
-    return SweepResult(quick, scenes_out, list(results.values()),
-                       time.perf_counter() - start)
+    for j in sorted(outcomes):   # each bug's scenes in the given order, however judged
+        name = jobs[j][0]
+        for mid, outcome in outcomes[j]:
+            r = results[mid]
+            if isinstance(outcome, Catch):
+                r.caught_by.append(outcome)
+            elif outcome == "blind":
+                r.blind.append(name)
+            elif outcome.startswith("error"):
+                r.errors.append(f"{name}: {outcome}")
+            else:
+                r.passed.append(name)
+    return SweepResult(quick, [s for _, s in sorted(scenes_out, key=lambda js: js[0])],
+                       list(results.values()), time.perf_counter() - start)
 
 
 def _judge_mutant(m: Mutant, units: list[Unit], reread: Callable | None = None):

@@ -79,6 +79,29 @@ def run_cli(*args, env=None, cwd=None, timeout=600):
                           timeout=timeout)
 
 
+def sweep_without_seconds(data: dict) -> dict:
+    """A formula-bug sweep's JSON (reference.mutants.SweepResult.to_json) without its
+    times, which differ from run to run."""
+    out = {k: v for k, v in data.items() if k != "seconds"}
+    out["scenes"] = [{k: v for k, v in s.items() if k != "seconds"} for s in data["scenes"]]
+    out["mutants"] = [{k: v for k, v in m.items() if k != "seconds"} for m in data["mutants"]]
+    return out
+
+
+def approx_floats(data, rel: float):
+    """``data`` (dicts, lists, numbers) with every float as ``pytest.approx(x, rel=rel)``,
+    to compare with ``==`` (pytest.approx itself takes no nested structures)."""
+    import pytest
+
+    if isinstance(data, dict):
+        return {k: approx_floats(v, rel) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [approx_floats(v, rel) for v in data]
+    if isinstance(data, float):
+        return pytest.approx(data, rel=rel, nan_ok=True)
+    return data
+
+
 def write_scene(tmp_path: Path, text: str, name: str = "scene.toml") -> Path:
     p = tmp_path / name
     p.write_text(text)

@@ -141,10 +141,15 @@ def stratified_2d(pixel, s, n: int, dimension: int):
                        jit.Array2f(x, (jit.Float(cy) + uniform(h2)) * inv))
 
 
-def jitter_2d(pixel, s, seed: int):
+def jitter_2d(pixel, s, seed):
     """A uniform 2D point in [0, 1)^2 per (pixel, sample, seed): where a jittered pixel
-    sample sits inside its stratum (independent of the light samples' streams)."""
-    key = pcg_hash(pixel * 0x27D4EB2D ^ pcg_hash(jit.UInt32(seed) + 0x165667B1))
+    sample sits inside its stratum (independent of the light samples' streams).
+    ``seed``: an int, or a jit.UInt32 of each lane's seed. An int seed is an input of
+    the kernel, not a constant in it, so that one compiled kernel serves every seed (an
+    imported scene's gaussian-filtered film renders its 8 seeds one by one)."""
+    if isinstance(seed, int):
+        seed = dr.opaque(jit.UInt32, seed)
+    key = pcg_hash(pixel * 0x27D4EB2D ^ pcg_hash(seed + 0x165667B1))
     h1 = pcg_hash(key ^ (s * 0x85EBCA6B + 0x3C6EF372))
     h2 = pcg_hash(h1 + 0x632BE5AB)
     return jit.Array2f(uniform(h1), uniform(h2))

@@ -148,13 +148,20 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     ``mutants``: also run the formula-bug sweep of :mod:`reference.mutants` over the
     same scenes (its quick sizes for a quick report, the scenes' own otherwise) and
     Mitsuba's own XML files of :func:`reference.mutants.structure_sources` (the
-    importer's bugs); the report then passes only if every bug is caught.
+    importer's bugs); the report then passes only if every bug is caught. A quick
+    report's sweep runs in a worker process beside the comparisons
+    (:mod:`reference.report.sweep_worker`); a full report's after them, in this process,
+    reusing their references and renders.
+
+    ``imported``: also Mitsuba's own scenes of
+    :func:`reference.renderers.mitsuba.importer.imported_cases`, imported and judged
+    (after the Fresnel curves; their seconds are measured beside whatever else still
+    runs: LuxCore's child, the quick report's sweep).
 
     ``luxcore``: also the three-way verdict of each scene with LuxCore
     (:mod:`reference.renderers.luxcore.vote`, one LuxCore child process for all scenes). The
     child starts first, at the lowest priority (:data:`LUXCORE_NICE`), and renders while
-    the comparisons, the Fresnel curves and the sweep run; the imported scenes, timed
-    too, come after it.
+    the comparisons, the Fresnel curves, the imported scenes and the sweep run.
     It does not change whether the report passes: that stays the tracer's verdict
     against Mitsuba. LuxCore's vote names the likely culprit of a disagreement (the
     tracer, Mitsuba or LuxCore), and LuxCore being the odd one out is a finding about
@@ -165,7 +172,7 @@ def build_report(outdir: str | Path, scene_paths: list[Path], quick: bool = Fals
     """
     from whitted.reference.shared import shared
 
-    with shared():   # the sweep reuses the comparisons' references and clean renders
+    with shared():   # a full sweep reuses the comparisons' references and clean renders
         return _build_report(outdir, scene_paths, quick, log, fresnel, reference,
                              second_opinion, mutants, luxcore, imported)
 
@@ -199,17 +206,27 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
         else:
             log(f"LuxCore: three-way verdicts of {len(sized)} scenes; LuxCore renders while "
                 "the report goes on")
+    worker = None
     try:
         from whitted.reference.renderers.luxcore.render import SharedCores
 
+        if mutants and quick:   # the sweep shares nothing with the comparisons at these sizes
+            from whitted.reference.report import sweep_worker
+
+            worker = sweep_worker.start(scene_paths, quick=True)
         _compare_scenes(report, scenes, work, quick, log, reference, second_opinion, total)
-        # Dr.Jit on one thread while LuxCore's child renders beside the untimed sweep
+        # Dr.Jit on one thread while LuxCore's child renders beside the untimed parts
         with SharedCores(None if started is None else started.job) as cores:
-            _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, total,
-                               cores.poll)
+            _fresnel(report, out, quick, log, fresnel, total)
+            if imported:
+                _imported(report, work, quick, log)
+            if mutants:
+                _sweep(report, scene_paths, quick, log, worker, cores.poll)
     except BaseException:
         if started is not None:
             started.close()
+        if worker is not None:
+            worker.close()
         raise
     threes = None
     if luxcore:
@@ -225,20 +242,6 @@ def _build_report(outdir, scene_paths, quick, log, fresnel, reference, second_op
             log(f"  {t.scene:<20} {t.verdict}" + (f" ({t.detail})" if t.detail else ""))
         log(f"LuxCore: {sum(t.compared for t in threes)} scenes compared "
             f"({time.perf_counter() - t_lux:.1f} s since it started)")
-    if imported:
-        from whitted.reference.renderers.mitsuba.importer import imported_cases, validate_case
-
-        for case in imported_cases(quick):
-            t0 = time.perf_counter()
-            entry = validate_case(case, work / "imported")
-            report.imported.append(entry)
-            report.passed &= entry["passed"]
-            for line in entry["structure"]["findings"]:
-                log(f"[imported] {case.name:<20} structure: {line}")
-            log(f"[imported] {case.name:<20} {'structure, z-test, mean':<22} "
-                f"{'pass' if entry['passed'] else 'FAIL'}"
-                f"{' (approximate)' if entry['approximate'] else ''}  "
-                f"({time.perf_counter() - t0:.1f} s)")
     report.seconds = time.perf_counter() - start
     data = report.to_json()
     data["scenes"] = [{k: v for k, v in s.items() if k not in ("images", "viewer")}
@@ -299,10 +302,8 @@ def _compare_scenes(report, scenes, work, quick, log, reference, second_opinion,
             f"{'pass' if result.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
 
 
-def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, total,
-                       between) -> None:
-    """The report's Fresnel curves and formula-bug sweep, while LuxCore's child renders;
-    ``between()`` is called between pieces of the sweep's work."""
+def _fresnel(report, out, quick, log, fresnel, total) -> None:
+    """The report's Fresnel curves."""
     from whitted.reference.teaching.fresnel_curves import DEFAULT_IORS, fresnel_table, plot
 
     if fresnel:
@@ -315,20 +316,48 @@ def _fresnel_and_sweep(report, out, scene_paths, quick, log, fresnel, mutants, t
         report.passed &= table.passed
         log(f"[{total}/{total}] {'fresnel curves':<20} {'float32/CI':<22} "
             f"{'pass' if table.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
-    if mutants:
-        from whitted.reference import mutants as mutant_sweep
 
+
+def _imported(report, work, quick, log) -> None:
+    """The imported scenes of reference.renderers.mitsuba.importer, each judged."""
+    from whitted.reference.renderers.mitsuba.importer import imported_cases, validate_case
+
+    for case in imported_cases(quick):
         t0 = time.perf_counter()
-        log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
-            f"({'quick' if quick else 'full'} sizes)")
-        sweep = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m),
-                                   between=between,
-                                   xml_sources=mutant_sweep.structure_sources())
-        report.mutants = sweep.to_json()
-        report.passed &= sweep.passed
-        log(f"formula bugs: {sum(m.caught for m in sweep.mutants)}/{len(sweep.mutants)} "
-            f"caught, tracer as written {'passes' if sweep.clean_passed else 'FAILS'}: "
-            f"{'pass' if sweep.passed else 'FAIL'}  ({time.perf_counter() - t0:.1f} s)")
+        entry = validate_case(case, work / "imported")
+        report.imported.append(entry)
+        report.passed &= entry["passed"]
+        for line in entry["structure"]["findings"]:
+            log(f"[imported] {case.name:<20} structure: {line}")
+        log(f"[imported] {case.name:<20} {'structure, z-test, mean':<22} "
+            f"{'pass' if entry['passed'] else 'FAIL'}"
+            f"{' (approximate)' if entry['approximate'] else ''}  "
+            f"({time.perf_counter() - t0:.1f} s)")
+
+
+def _sweep(report, scene_paths, quick, log, worker, between) -> None:
+    """The formula-bug sweep: the worker's (``worker``, started beside the comparisons,
+    reference.report.sweep_worker), waited for here, or run here (``worker`` None), with
+    ``between()`` called between pieces of its work."""
+    from whitted.reference import mutants as mutant_sweep
+
+    t0 = time.perf_counter()
+    log(f"formula bugs: {len(mutant_sweep.CATALOG)} mutants x {len(scene_paths)} scenes "
+        f"({'quick' if quick else 'full'} sizes"
+        f"{', swept beside the comparisons' if worker is not None else ''})")
+    if worker is not None:
+        data = worker.result(progress=lambda m: log("  " + m))
+        seconds = time.perf_counter() - worker.start
+    else:
+        data = mutant_sweep.sweep(scene_paths, quick=quick, log=lambda m: log("  " + m),
+                                  between=between,
+                                  xml_sources=mutant_sweep.structure_sources()).to_json()
+        seconds = time.perf_counter() - t0
+    report.mutants = data
+    report.passed &= data["pass"]
+    log(f"formula bugs: {sum(m['caught'] for m in data['mutants'])}/{len(data['mutants'])} "
+        f"caught, tracer as written {'passes' if data['clean_passed'] else 'FAILS'}: "
+        f"{'pass' if data['pass'] else 'FAIL'}  ({seconds:.1f} s)")
 
 
 #: Heckbert's expressions that partition a Whitted tracer's paths.

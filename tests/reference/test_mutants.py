@@ -15,7 +15,7 @@ from dataclasses import replace
 from pathlib import Path
 
 import pytest
-from conftest import ROOT, SCENES
+from conftest import ROOT, SCENES, sweep_without_seconds
 
 from whitted.reference import cli, mutants
 from whitted.reference.renderers.mitsuba.deterministic import DeterministicReference
@@ -217,3 +217,15 @@ def test_a_scene_with_jitter_and_a_gaussian_filter_is_swept_as_compare_judges_it
                            log=lambda _: None)
     assert result.clean_passed, mutants.format_table(result)
     assert result.all_caught
+
+
+def test_a_sweep_from_the_last_scene_gives_the_same_result_in_the_same_order():
+    """The quick report's worker sweeps the scenes last first (reference.report.sweep_worker);
+    its result lists scenes, and each bug's catches, in the given order all the same.
+    Both bugs here are caught by both scenes, so a list kept in judging order differs."""
+    picked = [SCENES / "sphere_point.toml", SCENES / "three_lights.toml"]
+    bugs = [mutants.BY_ID["lambert-no-inv-pi"], mutants.BY_ID["point-light-no-falloff"]]
+    forward = mutants.sweep(picked, bugs, log=lambda _: None)
+    backward = mutants.sweep(picked, bugs, log=lambda _: None, last_first=True)
+    assert [len(m.caught_by) for m in forward.mutants] == [2, 2]
+    assert sweep_without_seconds(backward.to_json()) == sweep_without_seconds(forward.to_json())
