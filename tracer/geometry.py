@@ -102,6 +102,16 @@ class _InstanceBlock(_Block):
         found = hit.valid
         return self._update(hit.t / scale, found, hit.prim, t, prim)
 
+    @property
+    def any_hit(self) -> bool:
+        """Whether :meth:`occluded` stops early: where the group's geometry does (a mesh)."""
+        return any(b.any_hit for b in self.child.blocks)
+
+    def occluded(self, o, d, tmax, active):
+        """The group's own answer in object space (:meth:`Geometry.occluded`)."""
+        ol, dl, scale = self._to_object(o, d)
+        return self.child.occluded(ol, dl, tmax * scale, active)
+
     def surface(self, k, o, d, t, mask):
         ol, dl, scale = self._to_object(o, d)
         s = self.child.surface(Hit(t * scale, dr.select(mask, k, INVALID)), ol, dl)
@@ -205,6 +215,55 @@ class _InstanceSetBlock(_Block):
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
         return t, prim
+
+    #: :meth:`occluded` stops at the first instance that blocks the ray
+    any_hit = True
+
+    def occluded(self, o, d, tmax, active):
+        """Where an instance blocks the segment (0, tmax): the hierarchy walked farther
+        child first (a shadow ray starts beside its own surface, which seldom blocks it,
+        :func:`tracer.bvh.inner_step`), each instance asked with the group's own
+        :meth:`Geometry.occluded` (a mesh's any-hit), the ray leaving at the first that
+        blocks it. The answer is :meth:`intersect`'s (a hit in (0, tmax) exists or not).
+        With the closest hit instead, the 4 instances of a 160,000-triangle torus
+        (``bench_speed.py process``'s scene) rendered in 0.72 s, against 0.19 s for one."""
+        n = dr.width(tmax) if dr.is_jit_v(tmax) else dr.width(o.x)
+        return self._occluded_loop(o, d, jit.Float(tmax) + dr.zeros(jit.Float, n),
+                                   jit.Bool(active) | dr.zeros(jit.Bool, n))
+
+    @backend.syntax
+    def _occluded_loop(self, o, d, tmax, alive):
+        from whitted.tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
+
+        n = dr.width(tmax)
+        inv = inverse_direction(d)
+        node = dr.full(jit.UInt32, self._root, n)
+        sp = dr.zeros(jit.UInt32, n)
+        stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
+        nodes = self.nodes
+        blocked = dr.zeros(jit.Bool, n)
+
+        while alive:
+            while alive & ((node & LEAF_FLAG) == 0):
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, [o], [inv],
+                                             [tmax], far_first=True)
+
+            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
+            end = i + (node & ((1 << COUNT_BITS) - 1))
+            while alive & (i < end):
+                act = alive & (i < end)
+                inst = dr.gather(jit.UInt32, self.order, i, act)
+                ol, dl, scale = self._to_object(inst, o, d, act)
+                hit = act & self.child.occluded(ol, dl, tmax * scale, act)
+                blocked |= hit
+                alive &= ~hit
+                i += 1
+
+            pop = alive & (sp > 0)
+            sp = dr.select(pop, sp - 1, sp)
+            node = dr.select(pop, stack.read(sp, pop), node)
+            alive &= pop
+        return blocked
 
     def surface(self, k, o, d, t, mask):
         m = self.child.count
