@@ -73,7 +73,7 @@ import drjit as dr
 import numpy as np
 
 from whitted.tracer import backend
-from whitted.tracer.backend import any_mask, greater, jit, lesser, upload
+from whitted.tracer.backend import aligned_zeros, any_mask, greater, jit, lesser, upload
 from whitted.tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
@@ -715,7 +715,7 @@ def pack_nodes(b: BVHArrays) -> tuple[np.ndarray, int, int]:
     ref = np.where(b.left >= 0, rank,
                    LEAF_FLAG | (b.start << COUNT_BITS) | b.count).astype(np.uint32)
     lo, hi = _outward(b.lo, b.hi)
-    rec = np.zeros((len(inner), 16), np.float32)
+    rec = aligned_zeros((len(inner), 16), np.float32)   # uploaded without a copy
     ln, rn = b.left[inner], b.right[inner]
     rec[:, 0:3], rec[:, 3:6] = np.take(lo, ln, axis=0), np.take(lo, rn, axis=0)
     rec[:, 6:9], rec[:, 9:12] = np.take(hi, ln, axis=0), np.take(hi, rn, axis=0)
@@ -773,7 +773,7 @@ class BVH:
         self.nodes = upload(jit.Float, rec if len(rec) else np.zeros((1, 16)), np.float32)
         o = self.arrays.order
         self.perm = upload(jit.UInt32, o, np.uint32)
-        tr = np.zeros((len(o), 16), np.float32)
+        tr = aligned_zeros((len(o), 16), np.float32)   # uploaded without a copy
         # The corners rounded once to float32, as tracer.geometry stores them: a vertex
         # shared by two triangles is the same float32 point in both (the watertight
         # test relies on it), and both modules give the same numbers.
@@ -1164,8 +1164,9 @@ def valid_arrays(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
     if levels != b.depth:
         return False
     # boxes: children inside parents, triangles inside leaves
+    lo_in, hi_in = np.take(b.lo, idx[inner], axis=0), np.take(b.hi, idx[inner], axis=0)
     for k in (li, ri):
-        if (b.lo[k] < b.lo[inner]).any() or (b.hi[k] > b.hi[inner]).any():
+        if (np.take(b.lo, k, axis=0) < lo_in).any() or (np.take(b.hi, k, axis=0) > hi_in).any():
             return False
     owner = np.empty(n, np.int64)   # the leaf of each triangle, in the caller's order
     owner[o] = np.repeat(np.flatnonzero(leaf)[by_start], cnt[by_start])
