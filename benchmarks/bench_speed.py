@@ -589,10 +589,13 @@ mi.util.write_bitmap(sys.argv[2], mi.render(scene))
 """
 
 #: The tracer's first render in a fresh process, split: import, mesh read, rest of the
-#: scene load, Integrator (BVH builds), render, EXR.
+#: scene load, Integrator (BVH builds), render, EXR. Freed memory kept as `whitted`
+#: keeps it (reference.malloc, the command's first step).
 SPLIT = """
 import sys, time
 t0 = time.perf_counter()
+from whitted.reference.malloc import keep_freed_memory
+keep_freed_memory()
 from whitted.tracer import load_scene, meshio
 from whitted.tracer.integrator import Integrator
 from whitted.tracer.imageio import write_image
