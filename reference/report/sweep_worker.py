@@ -38,6 +38,7 @@ import time
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from whitted.reference.child import Child
 from whitted.tracer.errors import UserError, one_line
 
 
@@ -66,11 +67,8 @@ def start(scene_paths: list[Path], quick: bool = True) -> SweepWorker:
 
 
 @dataclass
-class SweepWorker:
+class SweepWorker(Child):
     """A sweep at work in a worker process (:func:`start`)."""
-    proc: subprocess.Popen
-    tmp: Path
-    log: object
     start: float = field(default_factory=time.perf_counter)
 
     def result(self, progress=print) -> dict:
@@ -98,14 +96,6 @@ class SweepWorker:
             return read_result(self.tmp / "sweep.json")
         finally:
             self.close()
-
-    def close(self) -> None:
-        """Stop the worker if it still runs, and remove its files."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.log.close()
-        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 #: The keys of a sweep's JSON that the report reads, with their types.

@@ -13,6 +13,7 @@ import math
 import drjit as dr
 import numpy as np
 import pytest
+from conftest import MINIMAL
 
 from whitted.tracer.bvh import BVH, INVALID, build_bvh, sah_cost
 from whitted.tracer.shapes import triangle as tri_f
@@ -396,14 +397,21 @@ def test_a_scenes_occlusion_agrees_with_its_closest_hit(jit):
 
     geo = Geometry(load_scene(resolve_scene("mesh_knot")))
     assert sum(b.any_hit for b in geo.blocks) == 2 and len(geo.blocks) == 3
-    rng = np.random.default_rng(4)
-    o, d = random_rays(rng, 20000, [-3, -0.5, -3], [3, 3, 3])
+    _assert_occlusion_is_the_closest_hits(jit, geo, np.random.default_rng(4), [-3, -0.5, -3],
+                                          [3, 3, 3], 6.0, 0.05)
+
+
+def _assert_occlusion_is_the_closest_hits(jit, geo, rng, lo, hi, longest, least):
+    """Geometry.occluded of 20,000 segments (from points in the box lo-hi, up to ``longest``
+    long) equals whether the closest hit exists, with every lane active and with half;
+    at least the fraction ``least`` of them is blocked, and as many are not."""
+    o, d = random_rays(rng, 20000, lo, hi)
     d /= np.linalg.norm(d, axis=1, keepdims=True)  # the geometry's rays are unit vectors
-    tmax = jit.Float(rng.uniform(0.0, 6.0, len(o)).astype(np.float32))
+    tmax = jit.Float(rng.uniform(0.0, longest, len(o)).astype(np.float32))
     occ = geo.occluded(v3(jit, o), v3(jit, d), tmax).numpy()
     ref = geo.closest_hit(v3(jit, o), v3(jit, d), tmax).valid.numpy()
     np.testing.assert_array_equal(occ, ref)
-    assert 0.05 < occ.mean() < 0.95
+    assert least < occ.mean() < 1 - least
     active = rng.random(len(o)) < 0.5
     occ_a = geo.occluded(v3(jit, o), v3(jit, d), tmax, jit.Bool(active)).numpy()
     np.testing.assert_array_equal(occ_a, ref & active)
@@ -430,31 +438,19 @@ def test_the_same_triangles_share_a_tree_and_different_ones_do_not(jit):
     assert_same_hits(t, tri, t_ref, tri_ref)
 
 
-INSTANCED_KNOTS = """
-[film]
-width = 8
-height = 8
-
-[camera]
-origin = [0, 2, 6]
-target = [0, 0, 0]
-fov = 45
-
-[materials.clay]
-type = "diffuse"
-reflectance = 0.5
-
+#: Beside conftest.MINIMAL's sphere: a mesh and a ball, each a group.
+KNOT_AND_BALL = """
 [groups.knot]
 [[groups.knot.shapes]]
 type = "mesh"
 file = "{knot}"
-material = "clay"
+material = "white"
 
 [groups.ball]
 [[groups.ball.shapes]]
 type = "sphere"
 radius = 0.3
-material = "clay"
+material = "white"
 {places}
 """
 
@@ -479,7 +475,7 @@ def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
                                   ("knot", 0.5, 80, -1, 1), ("knot", 0.6, 120, 0.8, 0.9),
                                   ("ball", 1.5, 0, 0, 0)))
         path = tmp_path / "knots.toml"
-        path.write_text(INSTANCED_KNOTS.format(
+        path.write_text(MINIMAL + KNOT_AND_BALL.format(
             knot=resolve_scene("mesh_knot").parent / "meshes" / "knot.ply", places=places))
         scene = load_scene(path)
     else:
@@ -487,14 +483,5 @@ def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     geo = Geometry(scene)
     kinds = {type(b) for b in geo.blocks}
     assert _InstanceSetBlock in kinds and (name != "knots" or _InstanceBlock in kinds)
-    rng = np.random.default_rng(5)
-    o, d = random_rays(rng, 20000, [-2.5, -1, -2.5], [2.5, 2.5, 2.5])
-    d /= np.linalg.norm(d, axis=1, keepdims=True)  # the geometry's rays are unit vectors
-    tmax = jit.Float(rng.uniform(0.0, 5.0, len(o)).astype(np.float32))
-    occ = geo.occluded(v3(jit, o), v3(jit, d), tmax).numpy()
-    ref = geo.closest_hit(v3(jit, o), v3(jit, d), tmax).valid.numpy()
-    np.testing.assert_array_equal(occ, ref)
-    assert 0.02 < occ.mean() < 0.98
-    active = rng.random(len(o)) < 0.5
-    occ_a = geo.occluded(v3(jit, o), v3(jit, d), tmax, jit.Bool(active)).numpy()
-    np.testing.assert_array_equal(occ_a, ref & active)
+    _assert_occlusion_is_the_closest_hits(jit, geo, np.random.default_rng(5), [-2.5, -1, -2.5],
+                                          [2.5, 2.5, 2.5], 5.0, 0.02)

@@ -58,6 +58,7 @@ from pathlib import Path
 
 import numpy as np
 
+from whitted.reference.child import Child
 from whitted.reference.renderers.luxcore.scene import (
     Description,
     config_props,
@@ -220,11 +221,8 @@ def start_many(scenes: list, passes: int = PASSES, seed: int = 0,
 
 
 @dataclass
-class LuxJob:
+class LuxJob(Child):
     """A LuxCore child at work on a list of scenes (:func:`start_many`)."""
-    proc: subprocess.Popen
-    tmp: Path
-    log: object
     descs: list
     jobs: list
     total: int
@@ -283,16 +281,6 @@ class LuxJob:
         finally:
             self.close()
 
-    def running(self) -> bool:
-        return self.proc.poll() is None
-
-    def close(self) -> None:
-        """Stop the child if it still runs, and remove its files."""
-        if self.proc.poll() is None:
-            self.proc.kill()
-            self.proc.wait()
-        self.log.close()
-        shutil.rmtree(self.tmp, ignore_errors=True)
 
 
 class SharedCores:
