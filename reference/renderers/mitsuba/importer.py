@@ -36,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from whitted.reference import mitsuba_error
+from whitted.reference.renderers.mitsuba.scene import loading_threads
 from whitted.scenes import MITSUBA_DATA_DIR
 from whitted.tracer.errors import UserError, one_line
 from whitted.tracer.mitsuba_xml import Imported, read_xml
@@ -471,7 +472,8 @@ def mitsuba_view(path: str | Path, **params) -> dict:
 
     mi = mitsuba()
     try:
-        scene = mi.load_file(str(path), **params)
+        with loading_threads():
+            scene = mi.load_file(str(path), **params)
     except (RuntimeError, ValueError) as e:  # Mitsuba's C++ exceptions
         raise UserError(f"{one_line(str(path), 300)}: Mitsuba cannot load it: "
                         f"{mitsuba_error(e)}") from None
@@ -529,8 +531,9 @@ def render_original(source, integrator: str = "path", spp: int = 64, passes: int
     from whitted.reference import mitsuba
 
     mi = mitsuba()
-    scene = (mi.load_dict(source) if isinstance(source, dict)
-             else mi.load_file(str(source)))
+    with loading_threads():   # the report may run Dr.Jit on one thread here (SharedCores)
+        scene = (mi.load_dict(source) if isinstance(source, dict)
+                 else mi.load_file(str(source)))
     inner = {"type": "direct"} if integrator == "direct" else {"type": "path", "max_depth": 2}
     integ = mi.load_dict({"type": "moment", "nested": inner})
     names = integ.aov_names()

@@ -164,30 +164,54 @@ def test_dr_jit_gives_up_a_thread_while_the_child_runs_and_gets_it_back():
         assert dr.thread_count() == before     # no child: nothing given up
 
 
+def _completes_in_a_child(code: str, what: str) -> None:
+    """Run ``code`` in a child with a time limit (the bug is a hang); it prints 'loaded'."""
+    import subprocess
+    import sys
+
+    try:
+        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                             timeout=60, cwd=Path(__file__).resolve().parents[4])
+    except subprocess.TimeoutExpired:
+        pytest.fail(f"{what} hung with Dr.Jit on one thread")
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert "loaded" in out.stdout
+
+
 def test_mitsuba_loads_an_exr_map_while_dr_jit_has_one_thread():
     """SharedCores leaves Dr.Jit one thread during the report's sweep, and Mitsuba
     3.9.1's parser never returns from reading an EXR map on a pool of one thread:
     reference.renderers.mitsuba.scene.load gives the pool two threads for the load. Run in a
     child with a time limit, as the bug is a hang (without the two threads: killed)."""
-    import subprocess
-    import sys
+    _completes_in_a_child(
+        "import whitted.tracer, drjit as dr\n"
+        "from whitted.tracer import load_scene\n"
+        "from whitted.reference import mitsuba\n"
+        "from whitted.reference.renderers.mitsuba.scene import load\n"
+        f"scene = load_scene({str(SCENES / 'envmap.toml')!r})\n"
+        "dr.set_thread_count(1)\n"
+        "load(scene, mitsuba())\n"
+        "assert dr.thread_count() == 1\n"
+        "print('loaded')\n", "Mitsuba's load of an EXR map")
 
-    code = ("import whitted.tracer, drjit as dr\n"
-            "from whitted.tracer import load_scene\n"
-            "from whitted.reference import mitsuba\n"
-            "from whitted.reference.renderers.mitsuba.scene import load\n"
-            f"scene = load_scene({str(SCENES / 'envmap.toml')!r})\n"
-            "dr.set_thread_count(1)\n"
-            "load(scene, mitsuba())\n"
-            "assert dr.thread_count() == 1\n"
-            "print('loaded')\n")
-    try:
-        out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
-                             timeout=60, cwd=Path(__file__).resolve().parents[4])
-    except subprocess.TimeoutExpired:
-        pytest.fail("Mitsuba's load of an EXR map hung with Dr.Jit on one thread")
-    assert out.returncode == 0, out.stderr[-2000:]
-    assert "loaded" in out.stdout
+
+def test_an_imported_scene_with_an_exr_map_loads_while_dr_jit_has_one_thread(tmp_path):
+    """The report's imported scenes run while SharedCores leaves Dr.Jit one thread: the
+    importer's own loads of the original file (its sensor, its render) take two threads
+    too. The envmap scene written as Mitsuba XML (its EXR map beside it)."""
+    from whitted.reference import cli
+
+    xml = tmp_path / "envmap.xml"
+    assert cli.main(["export", str(SCENES / "envmap.toml"), "-o", str(xml)]) == 0
+    _completes_in_a_child(
+        "import whitted.tracer, drjit as dr\n"
+        "from whitted.reference.renderers.mitsuba.importer import mitsuba_view, "
+        "render_original\n"
+        "dr.set_thread_count(1)\n"
+        f"mitsuba_view({str(xml)!r})\n"
+        f"render_original({str(xml)!r}, 'direct', spp=1, passes=1)\n"
+        "assert dr.thread_count() == 1\n"
+        "print('loaded')\n", "The importer's load of an EXR map")
 
 
 def test_missing_luxcore_is_one_line(monkeypatch, capsys, tmp_path):
