@@ -451,17 +451,20 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, chunk, small):
     n_bins, bl, bh = _sum_bin_chunks(q // per, q % per, n_first, n_nc, per, k_n, k_blo, k_bhi)
     dr.eval(n_bins, bl, bh)
     m = len(h_big)
+    # The count of large nodes an input of the kernels, not a constant in them: the levels
+    # then share their kernels (a cold build compiled them anew for each level, issue 33).
+    m_in = dr.opaque(U, m)
     cnt = upload(U, h_cnt[h_big], np.uint32)
     best = dr.full(F, dr.inf, m)
     best_axis, best_bin = dr.zeros(U, m), dr.zeros(U, m)
     # The three axes' sweeps in one call, lane a m + i for axis a of node i.
     q = dr.arange(U, 3 * m)
-    costs, ats = _sweep(n_bins, bl, bh, (q % m) * per + (q // m) * nbmax,
-                        dr.full(U, bins, 3 * m), dr.gather(U, cnt, q % m))
+    costs, ats = _sweep(n_bins, bl, bh, (q % m_in) * per + (q // m_in) * nbmax,
+                        dr.full(U, bins, 3 * m), dr.gather(U, cnt, q % m_in))
     dr.eval(costs, ats)
     for a in range(3):
-        cost = dr.gather(F, costs, dr.arange(U, m) + a * m)
-        at = dr.gather(U, ats, dr.arange(U, m) + a * m)
+        cost = dr.gather(F, costs, dr.arange(U, m) + a * m_in)
+        at = dr.gather(U, ats, dr.arange(U, m) + a * m_in)
         better = (scale[a] > 0) & (cost < best)
         best = dr.select(better, cost, best)
         best_axis = dr.select(better, U(a), best_axis)

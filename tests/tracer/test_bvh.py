@@ -485,3 +485,20 @@ def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     assert _InstanceSetBlock in kinds and (name != "knots" or _InstanceBlock in kinds)
     _assert_occlusion_is_the_closest_hits(jit, geo, np.random.default_rng(5), [-2.5, -1, -2.5],
                                           [2.5, 2.5, 2.5], 5.0, 0.02)
+
+
+def test_builds_of_two_mesh_sizes_launch_the_same_kernels(jit):
+    """The BVH build's kernels take the count of a level's large nodes as an input, not a
+    constant: a build of 40,000 triangles and one of 90,000 (levels of other counts)
+    launch the same kernels. Before, each count compiled its own (issue 33)."""
+    def kernels(nu, nv):
+        p, f = torus(nu, nv)
+        dr.set_flag(dr.JitFlag.KernelHistory, True)
+        dr.kernel_history()  # clears it
+        try:
+            build_bvh(p[f[:, 0]], p[f[:, 1]], p[f[:, 2]])
+            return {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
+        finally:
+            dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+    assert kernels(300, 150) == kernels(200, 100)
