@@ -90,6 +90,7 @@ def main(argv=None) -> int:
     from whitted.reference import mitsuba
     from whitted.reference.renderers.mitsuba.scene import load
     from whitted.tracer import backend, load_scene
+    from whitted.tracer import bvh as bvh_module
     from whitted.tracer.bvh import sah_cost
     from whitted.tracer.integrator import Integrator
 
@@ -107,6 +108,8 @@ def main(argv=None) -> int:
         t0 = time.perf_counter()
         scene = load_scene(scene_file)
         load_s = time.perf_counter() - t0
+        # The build itself, not a read of the tree kept on disk by an earlier run.
+        bvh_module.DISK_MIN_TRIANGLES = len(f) + 1
         integ = Integrator(scene)
         bvh = next(b for b in integ.geo.blocks if hasattr(b, "bvh")).bvh
         a = bvh.arrays
