@@ -18,8 +18,18 @@ class Child:
     #: the caller's handle on the child's log
     log: object
 
+    def __post_init__(self) -> None:
+        self._part = ""   # the log's last line, while the child has not ended it
+
     def running(self) -> bool:
         return self.proc.poll() is None
+
+    def new_lines(self) -> list[str]:
+        """The lines the child has written to its log since the last call (whole lines
+        only: a line still being written waits for the next call)."""
+        self._part += self.log.read()
+        *lines, self._part = self._part.split("\n")
+        return lines
 
     def close(self) -> None:
         """Stop the child if it still runs, and remove its files."""

@@ -77,12 +77,10 @@ class SweepWorker(Child):
         already done first. A worker that fails raises UserError with its last line."""
         try:
             (self.tmp / "alone").touch()
-            part, tail = "", []
+            tail = []
             while True:
                 exited = self.proc.poll() is not None
-                part += self.log.read()
-                *lines, part = part.split("\n")
-                for line in lines:
+                for line in self.new_lines():
                     if line.startswith("@ "):
                         progress(line[2:])
                     elif line.strip():

@@ -239,13 +239,11 @@ class LuxJob(Child):
         (before it the caller's own work legitimately takes the cores), to ``timeout``
         or :func:`wait_limit` of the passes not yet done."""
         try:
-            done, tail, part = 0, [], ""
+            done, tail = 0, []
             waited, limit = time.perf_counter(), None
             while True:
                 exited = self.proc.poll() is not None
-                part += self.log.read()
-                *lines, part = part.split("\n")
-                for line in lines:
+                for line in self.new_lines():
                     if line.startswith("@pass"):
                         done += 1
                         if progress is not None:
