@@ -250,8 +250,9 @@ def upload(array_type, values, dtype):
 def aligned_zeros(shape, dtype):
     """A zeroed numpy array whose first element is on a 64-byte boundary: filled in place,
     it goes to :func:`upload` without a copy. For the large arrays built to be uploaded
-    (a BVH's records): the copy of a 1,000,000-triangle mesh's triangle records (64 MB,
-    into fresh pages) took 0.14 s of a 1.5 s ``whitted render`` (issue 33)."""
+    (a BVH's records), whose copy into fresh pages (64 MB of triangle records for a
+    1,000,000-triangle mesh) was a cost of every ``whitted render`` of such a mesh
+    (issue 33)."""
     import numpy as np
 
     dtype = np.dtype(dtype)

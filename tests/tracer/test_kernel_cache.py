@@ -200,8 +200,8 @@ def test_every_film_size_and_pixel_offset_shares_the_kernels(name):
 def test_every_seed_of_a_jittered_film_shares_the_kernel():
     """A jittered film rendered with two seeds launches the same kernels: the seed is an
     input of the jitter's hash, not a constant in it. An imported Mitsuba scene (jittered,
-    gaussian filter) renders its 8 seeds one by one, and each compiled its own kernel:
-    4 s of a cold report (issue 33)."""
+    gaussian filter) renders its 8 seeds one by one, and each compiled its own kernel
+    (issue 33)."""
     from dataclasses import replace
 
     backend.use()
