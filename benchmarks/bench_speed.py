@@ -588,6 +588,26 @@ scene = mi.load_file(sys.argv[1])
 mi.util.write_bitmap(sys.argv[2], mi.render(scene))
 """
 
+#: Mitsuba's side of :data:`MITSUBA_PROCESS`, split the same way: import (with the
+#: variant set), scene load (its meshes read and Embree's build), render, EXR.
+MITSUBA_SPLIT = """
+import sys, time
+t0 = time.perf_counter()
+import drjit as dr
+import mitsuba as mi
+mi.set_variant("llvm_ad_rgb")
+t1 = time.perf_counter()
+scene = mi.load_file(sys.argv[1])
+t2 = time.perf_counter()
+image = mi.render(scene)
+dr.eval(image)
+dr.sync_thread()
+t3 = time.perf_counter()
+mi.util.write_bitmap(sys.argv[2], image)
+t4 = time.perf_counter()
+print(t1 - t0, t2 - t1, t3 - t2, t4 - t3)
+"""
+
 #: The tracer's first render in a fresh process, split: import, mesh read, rest of the
 #: scene load, Integrator (BVH builds), render, EXR. Freed memory kept as `whitted`
 #: keeps it (reference.malloc, the command's first step).
@@ -671,53 +691,82 @@ def _timed_process(cmd: list, env: dict | None) -> float:
     return time.perf_counter() - t0
 
 
+#: `whitted` run by a Python command line, for a baseline checkout (PYTHONPATH chooses it).
+WHITTED_BY_PYTHON = ("import sys; from whitted.reference.cli import entrypoint; "
+                     "sys.argv[0] = 'whitted'; sys.exit(entrypoint())")
+
+
+def _with_env(env: dict | None, extra: dict) -> dict | None:
+    return dict(os.environ if env is None else env, **extra) if extra else env
+
+
 def cmd_process(args) -> int:
     w, h = args.size
     size = f"{w}x{h}"
+    rev = commit()
     print(f"whole process with meshes: {size}, {args.spp} spp, medians of {args.repeat} "
-          f"(each side alternating); commit {commit()}; {machine_note()}", flush=True)
-    with tempfile.TemporaryDirectory() as tmp:
-        tmp = Path(tmp)
+          f"(each side alternating); commit {rev}; {machine_note()}", flush=True)
+    with contextlib.ExitStack() as stack:
+        tmp = Path(stack.enter_context(tempfile.TemporaryDirectory()))
+        # The tracer's sides: this checkout's `whitted`, and --against's, with their
+        # environment's additions.
+        tracers = [(rev, [BIN / "whitted"], {})]
+        if args.against:
+            wt = stack.enter_context(_baseline_tree(args.against))
+            tracers.insert(0, (args.against, [sys.executable, "-c", WHITTED_BY_PYTHON],
+                               {"PYTHONPATH": str(_import_root(wt))}))
         script = tmp / "mitsuba_direct.py"
         script.write_text(MITSUBA_PROCESS)
         split = tmp / "split.py"
         split.write_text(SPLIT)
+        mitsuba_split = tmp / "mitsuba_split.py"
+        mitsuba_split.write_text(MITSUBA_SPLIT)
         for scene in write_process_scenes(tmp, args.triangles, args.ply_triangles, args.size,
                                           args.spp):
             mesh = next(tmp.glob(scene.stem + ".*[jy]"))
             xml = tmp / f"{scene.stem}.xml"
             run_child([BIN / "whitted", "export", scene, "--integrator", "direct", "--size",
                        size, "--spp", str(args.spp), "-o", xml])
-            tracer_cmd = [BIN / "whitted", "render", scene, "-o", tmp / "x.exr", "--size",
-                          size, "--spp", str(args.spp)]
-            mitsuba_cmd = [sys.executable, script, xml, tmp / "m.exr"]
+            sides = [(f"whitted render ({label})", [*cmd, "render", scene, "-o",
+                      tmp / "x.exr", "--size", size, "--spp", str(args.spp)], extra)
+                     for label, cmd, extra in tracers]
+            sides.append(("Mitsuba direct (Python process)",
+                          [sys.executable, script, xml, tmp / "m.exr"], {}))
             print(f"  {scene.stem}: {mesh.name} {mesh.stat().st_size / 1e6:.1f} MB",
                   flush=True)
             for label, fresh in (("cold", True), ("warm", False)):
                 if not fresh:  # fill the caches of this user's HOME first
-                    _timed_process(tracer_cmd, None)
-                    _timed_process(mitsuba_cmd, None)
-                times = {"tracer": [], "mitsuba": []}
+                    for _, cmd, extra in sides:
+                        _timed_process(cmd, _with_env(None, extra))
+                times = {name: [] for name, _, _ in sides}
                 for _ in range(args.repeat):
-                    for side, cmd in (("tracer", tracer_cmd), ("mitsuba", mitsuba_cmd)):
+                    for name, cmd, extra in sides:
                         env = _fresh_env(tmp) if fresh else None
-                        times[side].append(_timed_process(cmd, env))
-                t, m = (statistics.median(times[k]) for k in ("tracer", "mitsuba"))
-                print(f"    {label}: whitted render {t:6.2f} s [{min(times['tracer']):.2f}-"
-                      f"{max(times['tracer']):.2f}]  Mitsuba direct (Python process) "
-                      f"{m:6.2f} s [{min(times['mitsuba']):.2f}-{max(times['mitsuba']):.2f}]"
-                      f"  ratio {t / m:.2f} (target <= 1.0: {verdict(t <= m)})", flush=True)
-            rows = []
+                        times[name].append(_timed_process(cmd, _with_env(env, extra)))
+                m = statistics.median(times[sides[-1][0]])
+                for name, _, _ in sides:
+                    t = statistics.median(times[name])
+                    ratio = "" if name == sides[-1][0] else (
+                        f"  ratio to Mitsuba {t / m:.2f} (target <= 1.0: {verdict(t <= m)})")
+                    print(f"    {label}: {name:<34} {t:6.2f} s [{min(times[name]):.2f}-"
+                          f"{max(times[name]):.2f}]{ratio}", flush=True)
+            splits = [(f"tracer ({lab})", [sys.executable, split, scene, tmp / "s.exr"],
+                       extra, ("import", "mesh read", "rest of scene load",
+                               "Integrator (BVH)", "render", "EXR"))
+                      for lab, _, extra in tracers]
+            splits.append(("Mitsuba", [sys.executable, mitsuba_split, xml, tmp / "ms.exr"],
+                           {}, ("import", "scene load (meshes, Embree)", "render", "EXR")))
+            rows = {name: [] for name, *_ in splits}
             for _ in range(args.repeat):
-                out = subprocess.run([sys.executable, split, scene, tmp / "s.exr"],
-                                     capture_output=True, text=True, check=True)
-                rows.append([float(x) for x in out.stdout.split()[-6:]])
-            med = [statistics.median(col) for col in zip(*rows, strict=True)]
-            names = ("import", "mesh read", "rest of scene load", "Integrator (BVH)",
-                     "render", "EXR")
-            print("    tracer in-process, first of a process (warm caches), medians: "
-                  + ", ".join(f"{k} {x:.3f} s" for k, x in zip(names, med, strict=True)),
-                  flush=True)
+                for name, cmd, extra, names in splits:
+                    out = subprocess.run([str(c) for c in cmd], capture_output=True,
+                                         text=True, check=True, env=_with_env(None, extra))
+                    rows[name].append([float(x) for x in out.stdout.split()[-len(names):]])
+            for name, _, _, names in splits:
+                med = [statistics.median(col) for col in zip(*rows[name], strict=True)]
+                print(f"    {name} in-process, first of a process (warm caches), medians: "
+                      + ", ".join(f"{k} {x:.3f} s" for k, x in zip(names, med, strict=True)),
+                      flush=True)
     print("  the cold runs have empty HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR (Dr.Jit's "
           "kernel cache); Python's own bytecode caches stay warm")
     return 0
@@ -788,6 +837,9 @@ def main(argv=None) -> int:
     pr.add_argument("--repeat", type=int, default=5)
     pr.add_argument("--triangles", type=int, default=160_000)
     pr.add_argument("--ply-triangles", type=int, default=1_000_000)
+    pr.add_argument("--against", metavar="COMMIT",
+                    help="also time the `whitted render` of this commit (a git worktree "
+                         "run with this environment's packages), alternating")
 
     sub.add_parser("all", help="every subcommand at its defaults (memory at 16 spp)")
     args = p.parse_args(argv)

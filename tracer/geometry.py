@@ -97,10 +97,18 @@ class _InstanceBlock(_Block):
         return ol, dl / scale, scale
 
     def intersect(self, o, d, t, prim, active):
-        ol, dl, scale = self._to_object(o, d)
-        hit = self.child.closest_hit(ol, dl, t * scale, active)
-        found = hit.valid
-        return self._update(hit.t / scale, found, hit.prim, t, prim)
+        (t,), (prim,) = self.intersect_group([(o, d, active)], [t], [prim])
+        return t, prim
+
+    def intersect_group(self, rays, ts, prims):
+        """The K rays of a lane in object space, asked of the group together
+        (:meth:`Geometry.closest_hit_group`: a mesh walks its tree once for them)."""
+        local = [self._to_object(o, d) for o, d, _ in rays]
+        hits = self.child.closest_hit_group([(ol, dl, t * scale, a) for (ol, dl, scale), t, (
+            _, _, a) in zip(local, ts, rays, strict=True)])
+        out = [self._update(hit.t / scale, hit.valid, hit.prim, t, prim) for hit, (
+            _, _, scale), t, prim in zip(hits, local, ts, prims, strict=True)]
+        return [t for t, _ in out], [prim for _, prim in out]
 
     @property
     def any_hit(self) -> bool:
@@ -109,8 +117,12 @@ class _InstanceBlock(_Block):
 
     def occluded(self, o, d, tmax, active):
         """The group's own answer in object space (:meth:`Geometry.occluded`)."""
-        ol, dl, scale = self._to_object(o, d)
-        return self.child.occluded(ol, dl, tmax * scale, active)
+        return self.occluded_group([(o, d, tmax, active)])[0]
+
+    def occluded_group(self, rays):
+        local = [self._to_object(o, d) for o, d, _, _ in rays]
+        return self.child.occluded_group([(ol, dl, tmax * scale, a) for (ol, dl, scale), (
+            _, _, tmax, a) in zip(local, rays, strict=True)])
 
     def surface(self, k, o, d, t, mask):
         ol, dl, scale = self._to_object(o, d)
@@ -179,8 +191,19 @@ class _InstanceSetBlock(_Block):
         return ol, dl / scale, scale
 
     def intersect(self, o, d, t, prim, active):
-        return self._loop(o, d, t, prim, jit.Bool(active) | dr.zeros(jit.Bool, dr.width(t)),
-                          shadow=False)
+        (t,), (prim,) = self.intersect_group([(o, d, active)], [t], [prim])
+        return t, prim
+
+    def intersect_group(self, rays, ts, prims):
+        """:meth:`intersect` of K rays a lane: the hierarchy walked once for the K rays
+        (:func:`tracer.bvh.inner_step`), each instance reached asking its group with all
+        of them (:meth:`Geometry.closest_hit_group`), as a mesh's tree is walked
+        (:meth:`tracer.bvh.BVH.closest_hit_group`)."""
+        n = max(dr.width(x) for x in (*ts, *prims))
+        acts = [jit.Bool(a) | dr.zeros(jit.Bool, n) for _, _, a in rays]
+        ts = [jit.Float(t) + dr.zeros(jit.Float, n) for t in ts]
+        return self._loop([o for o, _, _ in rays], [d for _, d, _ in rays], ts, list(prims),
+                          acts, shadow=False)
 
     #: :meth:`occluded` stops at the first instance that blocks the ray
     any_hit = True
@@ -193,60 +216,90 @@ class _InstanceSetBlock(_Block):
         blocks it. The answer is :meth:`intersect`'s (a hit in (0, tmax) exists or not);
         before, the nearest hit was searched (``bench_speed.py process``'s scenes instance
         their meshes)."""
-        n = dr.width(tmax) if dr.is_jit_v(tmax) else dr.width(o.x)
-        t = jit.Float(tmax) + dr.zeros(jit.Float, n)
-        blocked, _ = self._loop(o, d, t, None, jit.Bool(active) | dr.zeros(jit.Bool, n),
-                                shadow=True)
+        return self.occluded_group([(o, d, tmax, active)])[0]
+
+    def occluded_group(self, rays):
+        """:meth:`occluded` of K rays a lane, walked together; a ray leaves the packet
+        when blocked, the packet when each of its rays is blocked or done."""
+        n = max(dr.width(x) if dr.is_jit_v(x) else 1 for ray in rays for x in
+                (ray[0].x, ray[2], ray[3]))
+        ts = [jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays]
+        acts = [jit.Bool(a) | dr.zeros(jit.Bool, n) for *_, a in rays]
+        blocked, _ = self._loop([o for o, *_ in rays], [d for _, d, *_ in rays], ts, None,
+                                acts, shadow=True)
         return blocked
 
     @backend.syntax
-    def _loop(self, o, d, t, prim, alive, shadow):
-        """The walk of :meth:`intersect` (the nearest hit: ``(t, prim)``), or with ``shadow``
-        of :meth:`occluded` (``t`` the segment's end: ``(blocked, None)``), as
-        :meth:`tracer.bvh.BVH._loop` walks a mesh's tree."""
+    def _loop(self, os, ds, ts, prims, acts, shadow):
+        """The walk of :meth:`intersect_group` (the nearest hits: ``(ts, prims)``), or with
+        ``shadow`` of :meth:`occluded_group` (``ts`` the segments' ends: ``(blocked,
+        None)``), K rays a lane, as :meth:`tracer.bvh.BVH._loop` walks a mesh's tree.
+        With K = 1 the lane's ``alive`` is the ray's state."""
         from whitted.tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
 
-        n = dr.width(t)
-        inv = inverse_direction(d)
+        K = len(os)
+        n = dr.width(ts[0])
+        invs = [inverse_direction(d) for d in ds]
         node = dr.full(jit.UInt32, self._root, n)
         sp = dr.zeros(jit.UInt32, n)
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
         nodes = self.nodes
-        blocked = dr.zeros(jit.Bool, n) if shadow else None
+        blocked = [dr.zeros(jit.Bool, n) for _ in range(K)] if shadow else None
+        alive = any_mask(acts)
+        if K == 1:
+            acts = None
 
         while alive:
             while alive & ((node & LEAF_FLAG) == 0):
-                node, sp, alive = inner_step(nodes, node, sp, stack, alive, [o], [inv], [t],
-                                             far_first=shadow)
+                node, sp, alive = inner_step(nodes, node, sp, stack, alive, os, invs, ts,
+                                             shadow, acts)
 
-            # The leaf's instances: the ray in each one's object space, the group asked.
+            # The leaf's instances: the rays in each one's object space, the group asked.
             i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
             end = i + (node & ((1 << COUNT_BITS) - 1))
             while alive & (i < end):
                 act = alive & (i < end)
                 inst = dr.gather(jit.UInt32, self.order, i, act)
-                t, prim, blocked, alive = self._visit(inst, act, o, d, t, prim, blocked, alive)
+                ts, prims, blocked, acts, alive = self._visit(inst, act, os, ds, ts, prims,
+                                                              blocked, acts, alive)
                 i += 1
 
             pop = alive & (sp > 0)
             sp = dr.select(pop, sp - 1, sp)
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
-        return (blocked, None) if shadow else (t, prim)
+        return (blocked, None) if shadow else (ts, prims)
 
-    def _visit(self, inst, act, o, d, t, prim, blocked, alive):
-        """Instance ``inst`` asked for the lanes in ``act``: (t, prim) updated with its
-        nearest hit, or, in :meth:`occluded` (``blocked`` not None), the lanes it blocks
-        marked and done."""
-        ol, dl, scale = self._to_object(inst, o, d, act)
+    def _visit(self, inst, act, os, ds, ts, prims, blocked, acts, alive):
+        """Instance ``inst`` asked for the lanes in ``act``, with each of their K rays
+        still taking part (``acts``, None for one ray a lane): (ts, prims) updated with
+        its nearest hits, or, in :meth:`occluded_group` (``blocked`` not None), the rays
+        it blocks marked and done."""
+        K = len(os)
+        rays, scales = [], []
+        for k in range(K):
+            ol, dl, scale = self._to_object(inst, os[k], ds[k], act)
+            rays.append((ol, dl, ts[k] * scale, act if acts is None else act & acts[k]))
+            scales.append(scale)
         if blocked is not None:
-            hit = act & self.child.occluded(ol, dl, t * scale, act)
-            return t, prim, blocked | hit, alive & ~hit
-        hit = self.child.closest_hit(ol, dl, t * scale, act)
-        found = act & hit.valid
-        return (dr.select(found, hit.t / scale, t),
-                dr.select(found, inst * self.child.count + hit.prim + self.base, prim),
-                blocked, alive)
+            more = self.child.occluded_group(rays)
+            for k in range(K):
+                hit = rays[k][3] & more[k]
+                blocked[k] = blocked[k] | hit
+                if acts is None:
+                    alive = alive & ~hit
+                else:
+                    acts[k] = acts[k] & ~hit
+            if acts is not None:
+                alive = alive & any_mask(acts)
+            return ts, prims, blocked, acts, alive
+        hits = self.child.closest_hit_group(rays)
+        for k in range(K):
+            found = rays[k][3] & hits[k].valid
+            ts[k] = dr.select(found, hits[k].t / scales[k], ts[k])
+            prims[k] = dr.select(found, inst * self.child.count + hits[k].prim + self.base,
+                                 prims[k])
+        return ts, prims, blocked, acts, alive
 
     def surface(self, k, o, d, t, mask):
         m = self.child.count
@@ -375,8 +428,10 @@ class Geometry:
         rad = np.concatenate(rads) if rads else np.zeros((1, 3), dtype=np.float32)
         self.material_id = _u(mid if len(mid) else np.zeros(1, dtype=np.uint32))
         self.radiance = _v3(rad if len(rad) else np.zeros((1, 3), dtype=np.float32))
-        #: whether a triangle mesh is among the blocks (top level only)
-        self.has_mesh = any(isinstance(b, shapes_mesh.Block) for b in self.blocks)
+        #: whether a triangle mesh is among the blocks, or in a group they instance
+        self.has_mesh = any(isinstance(b, shapes_mesh.Block)
+                            or getattr(getattr(b, "child", None), "has_mesh", False)
+                            for b in self.blocks)
         #: the shapes that emit light (area lights), top level only
         self.emitters = [s for s in members if getattr(s, "emitter", None) is not None]
 
@@ -443,6 +498,8 @@ class Geometry:
             for block in self.blocks:
                 more = block.occluded_group([(o, d, tmax, a & ~b) for (o, d, tmax, a), b
                                              in zip(rays, blocked, strict=True)])
+                if not every:  # a block may answer anything for a ray it was not asked
+                    more = [m & a for m, (_, _, _, a) in zip(more, rays, strict=True)]
                 blocked = [b | m for b, m in zip(blocked, more, strict=True)]
             return tuple(blocked)
 

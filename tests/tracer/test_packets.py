@@ -14,12 +14,13 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_bvh import assert_same_hits, random_rays, torus, v3
+from conftest import MINIMAL
+from test_bvh import KNOT_AND_BALL, assert_same_hits, random_rays, torus, v3
 
 from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from whitted.tracer import load_scene
 from whitted.tracer.bvh import BVH, INVALID
-from whitted.tracer.geometry import Geometry
+from whitted.tracer.geometry import Geometry, _InstanceBlock, _InstanceSetBlock
 from whitted.tracer.integrator import GROUP, Integrator
 
 
@@ -107,6 +108,75 @@ def test_the_geometry_answers_a_group_as_it_answers_each_ray(jit):
     mesh = next(b for b in geo.blocks if hasattr(b, "bvh"))
     assert (prims >= mesh.base).any() and (prims < mesh.base).any()
 
+
+
+def _instanced_knots(tmp_path):
+    """conftest.MINIMAL's sphere, the knot instanced three times (a hierarchy of
+    instances) and once more as a group of its own (one instance), and a ball instanced
+    once: every kind of instance block, with a mesh in its group or not."""
+    places = "".join(
+        f'\n[[shapes]]\ntype = "instance"\ngroup = "{g}"\nto_world = [ {{ scale = {s} }}, '
+        f'{{ rotate = {{ axis = [0, 1, 0], angle = {a} }} }}, '
+        f'{{ translate = [{x}, 0, {z}] }} ]\n'
+        for g, s, a, x, z in (("knot", 0.5, 0, -1, -1), ("knot", 0.7, 40, 1, -1),
+                              ("knot", 0.5, 80, -1, 1), ("other", 0.6, 120, 0.8, 0.9),
+                              ("ball", 1.5, 0, 0, 0)))
+    text = MINIMAL + KNOT_AND_BALL.format(knot=KNOT.parent / "meshes" / "knot.ply",
+                                          places=places)
+    text += f'\n[groups.other]\n[[groups.other.shapes]]\ntype = "mesh"\n' \
+            f'file = "{KNOT.parent / "meshes" / "knot.ply"}"\nmaterial = "white"\n'
+    path = tmp_path / "knots.toml"
+    path.write_text(text)
+    return load_scene(path)
+
+
+@pytest.mark.parametrize("coherent", [True, False])
+def test_instances_answer_a_group_as_they_answer_each_ray(jit, tmp_path, coherent):
+    """Instanced meshes walk K rays a lane together: the hierarchy of instances once for
+    the K rays, each instance asking its group (a mesh's tree) with all of them. Each
+    ray gets the hit and the occlusion it gets alone: the same t and primitive (the
+    same operations on the same numbers), with some rays of a lane inactive."""
+    geo = Geometry(_instanced_knots(tmp_path))
+    kinds = [type(b) for b in geo.blocks]
+    assert geo.has_mesh and _InstanceSetBlock in kinds and kinds.count(_InstanceBlock) == 2
+    rng = np.random.default_rng(7 + coherent)
+    n, k = 3000, 4
+    o, d = _rays(rng, n, k, coherent)
+    o = o * 1.5 + [0, 0.5, 0]
+    d /= np.linalg.norm(d, axis=1, keepdims=True)  # the geometry's rays are unit vectors
+    tmax = rng.uniform(0.5, 5.0, n * k).astype(np.float32)
+    active = rng.random(n * k) < 0.8
+    group = [(v3(jit, o[j::k]), v3(jit, d[j::k]), jit.Float(tmax[j::k]),
+              jit.Bool(active[j::k])) for j in range(k)]
+    hits = geo.closest_hit_group(group)
+    occ = geo.occluded_group(group)
+    prims = []
+    for j, (oj, dj, tj, aj) in enumerate(group):
+        one = geo.closest_hit(oj, dj, tj, aj)
+        np.testing.assert_array_equal(hits[j].t.numpy(), one.t.numpy())
+        np.testing.assert_array_equal(hits[j].prim.numpy(), one.prim.numpy())
+        np.testing.assert_array_equal(occ[j].numpy(), geo.occluded(oj, dj, tj, aj).numpy())
+        prims.append(one.prim.numpy())
+    # Rays that hit each kind of block, and rays that miss.
+    prims = np.concatenate(prims)
+    for b in geo.blocks:
+        assert ((prims >= b.base) & (prims < b.base + b.count)).sum() > 20, type(b).__name__
+    assert (prims == INVALID).sum() > 0.05 * n * k
+    # Lanes where some rays are blocked and others not.
+    blocked = np.stack([x.numpy() for x in occ], axis=1)
+    assert (blocked.any(axis=1) & ~blocked.all(axis=1)).sum() > 0.02 * n
+
+
+def test_a_render_of_instanced_meshes_with_k_rays_a_lane_equals_one_ray_a_lane(tmp_path):
+    scene = _instanced_knots(tmp_path).with_overrides(size=(48, 36), spp=8)
+    one = Integrator(scene, group=1, schedule="wavefront").render(moments=True)
+    packed = Integrator(scene, group=GROUP, schedule="wavefront").render(moments=True)
+    assert Integrator(scene).group == GROUP
+    assert one.image.any()
+    np.testing.assert_array_equal(packed.image, one.image)
+    np.testing.assert_array_equal(packed.variance, one.variance)
+    assert packed.rays_per_level == one.rays_per_level
+    assert packed.shadow_rays_per_level == one.shadow_rays_per_level
 
 KNOT = Path(__file__).resolve().parents[2] / "scenes" / "mesh_knot.toml"
 

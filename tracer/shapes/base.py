@@ -174,9 +174,15 @@ class Block:
     def intersect_group(self, rays, ts, prims):
         """:meth:`intersect` of K rays a lane, ``rays`` a list of K (o, d, active): lists
         of K t and prim. By default each ray on its own; a block that can walk the K
-        rays of a lane together (a mesh's) does."""
-        out = [self.intersect(o, d, t, prim, a)
-               for (o, d, a), t, prim in zip(rays, ts, prims, strict=True)]
+        rays of a lane together (a mesh's) does. A ray outside its ``active`` keeps its
+        t and prim: the rays of a lane share the loops that skip inactive lanes, and an
+        unrolled table tests every ray it is given."""
+        out = []
+        for (o, d, a), t, prim in zip(rays, ts, prims, strict=True):
+            ti, pi = self.intersect(o, d, t, prim, a)
+            if a is not True:
+                ti, pi = dr.select(a, ti, t), dr.select(a, pi, prim)
+            out.append((ti, pi))
         return [t for t, _ in out], [prim for _, prim in out]
 
     def occluded_group(self, rays):
