@@ -21,7 +21,10 @@ its inverse transpose. A few instances of a group are unrolled one after the
 other; from ``INSTANCE_SET_MIN`` on, the instances of a group sit in a
 bounding-volume hierarchy of their world-space boxes (a top-level BVH, built
 by tracer/bvh.py's builder), so that a ray visits about log n of n instances
-and the kernel's size does not grow with n.
+and the kernel's size does not grow with n. The K rays a lane of
+:meth:`Geometry.closest_hit_group` (a pixel's samples, where a mesh is
+instanced) walk that hierarchy together and ask each instance they reach with
+all K, so that the group's mesh walks its tree once for them.
 
 The hit record (:class:`Surface`) holds the position, the geometric normal
 (outward, unit), the shading normal (the interpolated vertex normal of a

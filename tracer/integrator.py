@@ -54,10 +54,11 @@ level from every child batch at once (:func:`_compact`); the level's ray
 counts are summed on the device and read when the render ends. A batch
 carries only what cannot be recomputed (ray, weight, sample slot).
 
-In a scene with a triangle mesh, the camera level gives each lane K samples
-of one pixel (:data:`GROUP`, :attr:`Integrator.group`): the K rays walk the
-mesh's BVH together, reading each node once (:meth:`Geometry.closest_hit_group`),
-and so do their shadow rays to each light; the rest of the shading is done for
+In a scene with a triangle mesh, placed or instanced, the camera level gives
+each lane K samples of one pixel (:data:`GROUP`, :attr:`Integrator.group`): the
+K rays walk the mesh's BVH together, reading each node once
+(:meth:`Geometry.closest_hit_group`), and a hierarchy of instances too, and so
+do their shadow rays to each light; the rest of the shading is done for
 each ray on its own, by the same operations, so the image and the ray counts
 are those of one ray a lane, exactly (``tests/tracer/test_packets.py``). The light of
 the K rays is put back in sample order after the level's kernel.
@@ -129,11 +130,12 @@ SCHEDULES = ("auto", "wavefront", "stack")
 #: 0.22 s, 440 MB; a throwaway script, peak resident memory of the process).
 SEEDS_PER_LANE_SAMPLE = 4
 
-#: Camera rays a lane (:attr:`Integrator.group`) where the scene has a mesh: the lane's
-#: rays walk the BVH as a packet, reading each node and triangle once for all of them
-#: (:meth:`tracer.bvh.BVH.closest_hit_group`). A lane's K rays are K consecutive
-#: samples of one pixel (K divides the samples of a pixel), so their walks nearly
-#: coincide. The render of ``benchmarks/bench_mesh.py``'s scene (144,000 triangles,
+#: Camera rays a lane (:attr:`Integrator.group`) where the scene has a mesh (placed, or in
+#: an instanced group): the lane's rays walk the BVH as a packet, reading each node and
+#: triangle once for all of them (:meth:`tracer.bvh.BVH.closest_hit_group`; instances:
+#: :meth:`tracer.geometry._InstanceSetBlock.intersect_group`). A lane's K rays are K
+#: consecutive samples of one pixel (K divides the samples of a pixel), so their walks
+#: nearly coincide. The render of ``benchmarks/bench_mesh.py``'s scene (144,000 triangles,
 #: 640x480, 16 spp; a throwaway script, medians of 7, two rounds): K = 1 249 ms,
 #: 2 190-197 ms, 4 177-185 ms, 8 186-188 ms.
 GROUP = 4
