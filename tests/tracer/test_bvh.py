@@ -455,6 +455,20 @@ material = "white"
 """
 
 
+def knots_and_ball(knot, fourth: str) -> str:
+    """conftest.MINIMAL with :data:`KNOT_AND_BALL`: the knot (the PLY file ``knot``)
+    instanced three times, a fourth knot instancing the group ``fourth``, and the ball
+    instanced once, scaled."""
+    places = "".join(
+        f'\n[[shapes]]\ntype = "instance"\ngroup = "{g}"\nto_world = [ {{ scale = {s} }}, '
+        f'{{ rotate = {{ axis = [0, 1, 0], angle = {a} }} }}, '
+        f'{{ translate = [{x}, 0, {z}] }} ]\n'
+        for g, s, a, x, z in (("knot", 0.5, 0, -1, -1), ("knot", 0.7, 40, 1, -1),
+                              ("knot", 0.5, 80, -1, 1), (fourth, 0.6, 120, 0.8, 0.9),
+                              ("ball", 1.5, 0, 0, 0)))
+    return MINIMAL + KNOT_AND_BALL.format(knot=knot, places=places)
+
+
 @pytest.mark.parametrize("name", ["instances_scaled", "shapes_zoo", "knots"])
 def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     """Where instances block a segment (tracer/geometry.py: a hierarchy of instances walked
@@ -467,16 +481,9 @@ def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     from whitted.tracer.geometry import Geometry, _InstanceBlock, _InstanceSetBlock
 
     if name == "knots":
-        places = "".join(
-            f'\n[[shapes]]\ntype = "instance"\ngroup = "{g}"\nto_world = [ {{ scale = {s} }}, '
-            f'{{ rotate = {{ axis = [0, 1, 0], angle = {a} }} }}, '
-            f'{{ translate = [{x}, 0, {z}] }} ]\n'
-            for g, s, a, x, z in (("knot", 0.5, 0, -1, -1), ("knot", 0.7, 40, 1, -1),
-                                  ("knot", 0.5, 80, -1, 1), ("knot", 0.6, 120, 0.8, 0.9),
-                                  ("ball", 1.5, 0, 0, 0)))
         path = tmp_path / "knots.toml"
-        path.write_text(MINIMAL + KNOT_AND_BALL.format(
-            knot=resolve_scene("mesh_knot").parent / "meshes" / "knot.ply", places=places))
+        path.write_text(knots_and_ball(resolve_scene("mesh_knot").parent / "meshes" / "knot.ply",
+                                       "knot"))
         scene = load_scene(path)
     else:
         scene = load_scene(resolve_scene(name))

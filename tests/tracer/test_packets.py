@@ -14,8 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import MINIMAL
-from test_bvh import KNOT_AND_BALL, assert_same_hits, random_rays, torus, v3
+from test_bvh import assert_same_hits, knots_and_ball, random_rays, torus, v3
 
 from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from whitted.tracer import load_scene
@@ -114,19 +113,11 @@ def _instanced_knots(tmp_path):
     """conftest.MINIMAL's sphere, the knot instanced three times (a hierarchy of
     instances) and once more as a group of its own (one instance), and a ball instanced
     once: every kind of instance block, with a mesh in its group or not."""
-    places = "".join(
-        f'\n[[shapes]]\ntype = "instance"\ngroup = "{g}"\nto_world = [ {{ scale = {s} }}, '
-        f'{{ rotate = {{ axis = [0, 1, 0], angle = {a} }} }}, '
-        f'{{ translate = [{x}, 0, {z}] }} ]\n'
-        for g, s, a, x, z in (("knot", 0.5, 0, -1, -1), ("knot", 0.7, 40, 1, -1),
-                              ("knot", 0.5, 80, -1, 1), ("other", 0.6, 120, 0.8, 0.9),
-                              ("ball", 1.5, 0, 0, 0)))
-    text = MINIMAL + KNOT_AND_BALL.format(knot=KNOT.parent / "meshes" / "knot.ply",
-                                          places=places)
-    text += f'\n[groups.other]\n[[groups.other.shapes]]\ntype = "mesh"\n' \
-            f'file = "{KNOT.parent / "meshes" / "knot.ply"}"\nmaterial = "white"\n'
+    knot = KNOT.parent / "meshes" / "knot.ply"
     path = tmp_path / "knots.toml"
-    path.write_text(text)
+    path.write_text(knots_and_ball(knot, "other") + '\n[groups.other]\n'
+                    f'[[groups.other.shapes]]\ntype = "mesh"\nfile = "{knot}"\n'
+                    'material = "white"\n')
     return load_scene(path)
 
 
