@@ -224,8 +224,7 @@ class _InstanceSetBlock(_Block):
     def occluded_group(self, rays):
         """:meth:`occluded` of K rays a lane, walked together; a ray leaves the packet
         when blocked, the packet when each of its rays is blocked or done."""
-        n = max(dr.width(x) if dr.is_jit_v(x) else 1 for ray in rays for x in
-                (ray[0].x, ray[2], ray[3]))
+        n = max(dr.width(x) for ray in rays for x in ray)
         ts = [jit.Float(tmax) + dr.zeros(jit.Float, n) for _, _, tmax, _ in rays]
         acts = [jit.Bool(a) | dr.zeros(jit.Bool, n) for *_, a in rays]
         blocked, _ = self._loop([o for o, *_ in rays], [d for _, d, *_ in rays], ts, None,
