@@ -41,7 +41,6 @@ import numpy as np
 
 from whitted.tracer import backend, faults, shapes
 from whitted.tracer.backend import any_mask, jit, upload
-from whitted.tracer.shapes import mesh as shapes_mesh
 from whitted.tracer.shapes.base import INVALID as INVALID
 from whitted.tracer.shapes.base import UNROLL as UNROLL
 from whitted.tracer.shapes.base import Block as _Block
@@ -106,11 +105,14 @@ class _InstanceBlock(_Block):
     def intersect_group(self, rays, ts, prims):
         """The K rays of a lane in object space, asked of the group together
         (:meth:`Geometry.closest_hit_group`: a mesh walks its tree once for them)."""
-        local = [self._to_object(o, d) for o, d, _ in rays]
-        hits = self.child.closest_hit_group([(ol, dl, t * scale, a) for (ol, dl, scale), t, (
-            _, _, a) in zip(local, ts, rays, strict=True)])
-        out = [self._update(hit.t / scale, hit.valid, hit.prim, t, prim) for hit, (
-            _, _, scale), t, prim in zip(hits, local, ts, prims, strict=True)]
+        asked, scales = [], []
+        for (o, d, a), t in zip(rays, ts, strict=True):
+            ol, dl, scale = self._to_object(o, d)
+            asked.append((ol, dl, t * scale, a))
+            scales.append(scale)
+        hits = self.child.closest_hit_group(asked)
+        out = [self._update(hit.t / scale, hit.valid, hit.prim, t, prim)
+               for hit, scale, t, prim in zip(hits, scales, ts, prims, strict=True)]
         return [t for t, _ in out], [prim for _, prim in out]
 
     @property
@@ -118,14 +120,20 @@ class _InstanceBlock(_Block):
         """Whether :meth:`occluded` stops early: where the group's geometry does (a mesh)."""
         return any(b.any_hit for b in self.child.blocks)
 
+    @property
+    def has_mesh(self) -> bool:
+        return self.child.has_mesh
+
     def occluded(self, o, d, tmax, active):
         """The group's own answer in object space (:meth:`Geometry.occluded`)."""
         return self.occluded_group([(o, d, tmax, active)])[0]
 
     def occluded_group(self, rays):
-        local = [self._to_object(o, d) for o, d, _, _ in rays]
-        return self.child.occluded_group([(ol, dl, tmax * scale, a) for (ol, dl, scale), (
-            _, _, tmax, a) in zip(local, rays, strict=True)])
+        asked = []
+        for o, d, tmax, a in rays:
+            ol, dl, scale = self._to_object(o, d)
+            asked.append((ol, dl, tmax * scale, a))
+        return self.child.occluded_group(asked)
 
     def surface(self, k, o, d, t, mask):
         ol, dl, scale = self._to_object(o, d)
@@ -211,11 +219,15 @@ class _InstanceSetBlock(_Block):
     #: :meth:`occluded` stops at the first instance that blocks the ray
     any_hit = True
 
+    @property
+    def has_mesh(self) -> bool:
+        return self.child.has_mesh
+
     def occluded(self, o, d, tmax, active):
         """Where an instance blocks the segment (0, tmax): the hierarchy walked farther
         child first (a shadow ray starts beside its own surface, which seldom blocks it,
         :func:`tracer.bvh.inner_step`), each instance asked with the group's own
-        :meth:`Geometry.occluded` (a mesh's any-hit), the ray leaving at the first that
+        :meth:`Geometry.occluded_group` (a mesh's any-hit), the ray leaving at the first that
         blocks it. The answer is :meth:`intersect`'s (a hit in (0, tmax) exists or not);
         before, the nearest hit was searched (``bench_speed.py process``'s scenes instance
         their meshes)."""
@@ -431,9 +443,7 @@ class Geometry:
         self.material_id = _u(mid if len(mid) else np.zeros(1, dtype=np.uint32))
         self.radiance = _v3(rad if len(rad) else np.zeros((1, 3), dtype=np.float32))
         #: whether a triangle mesh is among the blocks, or in a group they instance
-        self.has_mesh = any(isinstance(b, shapes_mesh.Block)
-                            or getattr(getattr(b, "child", None), "has_mesh", False)
-                            for b in self.blocks)
+        self.has_mesh = any(b.has_mesh for b in self.blocks)
         #: the shapes that emit light (area lights), top level only
         self.emitters = [s for s in members if getattr(s, "emitter", None) is not None]
 

@@ -164,6 +164,10 @@ class Block:
     #: whether :meth:`occluded` stops at the first hit (else it is the closest hit's)
     any_hit = False
 
+    #: whether a triangle mesh's BVH is walked, here or in an instanced group (the
+    #: integrator then traces a pixel's samples K to a lane, tracer/integrator.py's GROUP)
+    has_mesh = False
+
     def occluded(self, o, d, tmax, active):
         """Where one of the block's primitives lies on the ray at 0 < t < tmax (lanes in
         ``active``; others may answer anything): by default its closest hit."""

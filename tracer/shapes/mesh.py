@@ -113,6 +113,7 @@ class Block(base.Block):
         return t, prim
 
     any_hit = True
+    has_mesh = True
 
     def occluded(self, o, d, tmax, active):
         return self.bvh.occluded(o, d, tmax, active)
