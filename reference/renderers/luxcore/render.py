@@ -280,7 +280,6 @@ class LuxJob(Child):
             self.close()
 
 
-
 class SharedCores:
     """Dr.Jit on one thread while a LuxCore child renders beside this process.
 
