@@ -466,6 +466,18 @@ def _cold_and_warm(root: Path, quick: bool) -> tuple[float, float]:
     return cold, warm
 
 
+def compile_bytecode(root: Path) -> None:
+    """Byte-code for ``root``'s own modules, as ``make setup`` writes it, where it is
+    missing or older than its source. An editable install leaves it to Python, and where
+    PYTHONDONTWRITEBYTECODE is set (as on the machine used here) Python never writes it:
+    a checkout edited since its set-up, or a new worktree, then compiles those modules
+    in every process it starts, which a user's installed copy does not. Without this,
+    each timed process paid that compile (a `whitted render`'s import step, as
+    ``process`` splits it, was a third longer in this checkout)."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", "tracer", "reference",
+                    "scenes"], cwd=root, check=True, stdout=subprocess.DEVNULL)
+
+
 @contextlib.contextmanager
 def _baseline_tree(rev: str):
     """A git worktree of commit ``rev``, removed afterwards: the baseline's report runs
@@ -475,6 +487,7 @@ def _baseline_tree(rev: str):
     subprocess.run(["git", "-C", str(ROOT), "worktree", "add", "--detach", str(wt), rev],
                    check=True, capture_output=True)
     try:
+        compile_bytecode(wt)
         yield wt
     finally:
         subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force", str(wt)],
@@ -846,6 +859,7 @@ def main(argv=None) -> int:
     cmds = {"direct": cmd_direct, "mesh": cmd_mesh, "recursion": cmd_recursion,
             "quality": cmd_quality, "memory": cmd_memory, "report": cmd_report,
             "process": cmd_process}
+    compile_bytecode(ROOT)   # the timed processes start as an installed copy's would
     if args.cmd == "all":
         for c in cmds:
             extra = ["--spp", "16"] if c == "memory" else []
