@@ -247,7 +247,11 @@ def _mutations(b: bvh.BVHArrays, n: int):
     yield "arrays of another length", changed(order=lambda a: None, count=b.count[:-1].copy())
 
 
-def test_every_broken_invariant_fails_the_check(tmp_path):
+@pytest.mark.parametrize("parallel", [False, True], ids=["one thread", "boxes beside"])
+def test_every_broken_invariant_fails_the_check(tmp_path, monkeypatch, parallel):
+    """Each broken invariant fails the check, whether the boxes are checked after the
+    structure or beside it, on a second thread (bvh.PARALLEL_CHECK_FROM)."""
+    monkeypatch.setattr(bvh, "PARALLEL_CHECK_FROM", 1 if parallel else 1 << 62)
     p = _knot_corners(tmp_path)
     b = bvh.build_bvh(*p)
     assert bvh.valid_arrays(b, *p)
