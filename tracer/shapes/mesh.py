@@ -101,6 +101,19 @@ def _face_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     return n
 
 
+def _tree_beside_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> tuple:
+    """(:func:`tracer.bvh.shared_bvh`, :func:`_face_normals`), the normals computed on a
+    second core while the tree is hashed, read, checked and packed: numpy's loops let go
+    of Python's lock, and so does hashing."""
+    from concurrent.futures import ThreadPoolExecutor
+
+    from whitted.tracer.bvh import shared_bvh
+
+    with ThreadPoolExecutor(max_workers=1) as pool:
+        normals = pool.submit(_face_normals, p0, p1, p2)
+        return shared_bvh(p0, p1, p2), normals.result()
+
+
 class Block(base.Block):
     """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
 
@@ -111,17 +124,9 @@ class Block(base.Block):
         self.count = len(f)
         p0, p1, p2 = (np.take(v, f[:, k], axis=0) for k in range(3))
         if self.count < PARALLEL_NORMALS_FROM:
-            self.bvh = shared_bvh(p0, p1, p2)
-            n = _face_normals(p0, p1, p2)
+            self.bvh, n = shared_bvh(p0, p1, p2), _face_normals(p0, p1, p2)
         else:
-            # numpy's loops let go of Python's lock, and so does hashing: the normals are
-            # computed on a second core while the tree is hashed, read, checked and packed.
-            from concurrent.futures import ThreadPoolExecutor
-
-            with ThreadPoolExecutor(max_workers=1) as pool:
-                normals = pool.submit(_face_normals, p0, p1, p2)
-                self.bvh = shared_bvh(p0, p1, p2)
-                n = normals.result()
+            self.bvh, n = _tree_beside_normals(p0, p1, p2)
         self.face_n = base.v3(n)
         self.faces = base.uints(f.reshape(-1))
         self.p = base.v3(v)
