@@ -182,15 +182,109 @@ def sah_cost(lo, hi, count, inner, traversal_cost: float = 2.0,
                  / area[0])
 
 
+#: Box sets of at most this many boxes (the instances of a group in most scenes) are built
+#: on the host by :func:`_small_box_tree`, not by the device builder, whose first call in a
+#: process (its loops' syntax transformed, its kernels read from the cache, a wait for
+#: the device at each level) took 40-60 ms for 4 boxes, and later calls 15 ms (a throwaway
+#: script); the host takes well under a millisecond for a few boxes.
+SMALL_BOX_SET = 64
+
+
 def build_box_bvh(lo: np.ndarray, hi: np.ndarray, **options) -> BVHArrays:
     """A binned-SAH BVH over axis-aligned boxes [lo[i], hi[i]] (e.g. placed instances).
 
     The builder sees only the bounding box of each triangle, so box i is given
     as the degenerate triangle (lo, hi, hi), whose bounding box it is; ``order``
-    then lists box indices. Options as for :func:`build_bvh`.
+    then lists box indices. Options as for :func:`build_bvh`. Up to
+    :data:`SMALL_BOX_SET` boxes, the tree is :func:`_small_box_tree`'s.
     """
     lo, hi = (np.asarray(a, dtype=np.float64).reshape(-1, 3) for a in (lo, hi))
-    return build_bvh(lo, hi, hi, **options)
+    if not 1 <= len(lo) <= SMALL_BOX_SET or len(hi) != len(lo):
+        return build_bvh(lo, hi, hi, **options)
+    t_start = time.perf_counter()
+    if not (np.isfinite(lo).all() and np.isfinite(hi).all()):
+        raise ValueError("triangle corners must be finite")
+    max_leaf = options.get("max_leaf", 4)
+    if not 1 <= max_leaf < (1 << COUNT_BITS):
+        raise ValueError(f"max_leaf must be between 1 and {(1 << COUNT_BITS) - 1}")
+    arrays = _small_box_tree(*_float32_boxes(np.minimum(lo, hi), np.maximum(lo, hi)),
+                             max_leaf, float(options.get("traversal_cost", 2.0)),
+                             float(options.get("intersection_cost", 1.0)))
+    return BVHArrays(*arrays, seconds=time.perf_counter() - t_start)
+
+
+def _float32_boxes(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The float32 boxes that hold the float64 ones, rounded as :func:`_triangle_boxes`
+    rounds a triangle's (outwards, and a bound that would be subnormal to zero or the
+    smallest normal float32, whichever lies outside: the CPU's kernels flush subnormals)."""
+    lo32, hi32 = lo.astype(np.float32), hi.astype(np.float32)
+    lo32 = np.where(lo32 > lo, np.nextafter(lo32, np.float32(-np.inf)), lo32)
+    hi32 = np.where(hi32 < hi, np.nextafter(hi32, np.float32(np.inf)), hi32)
+    lo32 = np.where(np.abs(lo32) < FLT_MIN, np.where(lo < 0, -FLT_MIN, 0.0), lo32)
+    hi32 = np.where(np.abs(hi32) < FLT_MIN, np.where(hi > 0, FLT_MIN, 0.0), hi32)
+    return lo32.astype(np.float32), hi32.astype(np.float32)
+
+
+def _half_areas(lo: np.ndarray, hi: np.ndarray) -> np.ndarray:
+    """Half the surface areas of boxes (rows), float64; empty boxes give 0."""
+    d = np.maximum(np.asarray(hi, np.float64) - lo, 0.0)
+    return d[..., 0] * d[..., 1] + d[..., 1] * d[..., 2] + d[..., 2] * d[..., 0]
+
+
+def _small_box_tree(lo: np.ndarray, hi: np.ndarray, max_leaf: int, c_trav: float,
+                    c_isect: float) -> tuple:
+    """(lo, hi, left, right, start, count, order, depth) of a SAH tree over a few float32
+    boxes, built top-down on the host and numbered depth-first, as :func:`build_bvh`'s.
+
+    Each node tries every split between its boxes sorted by centroid on each axis (the
+    binned builder's candidates are a subset) and takes the cheapest, A_L n_L + A_R n_R;
+    it becomes a leaf by the binned builder's rule: at most ``max_leaf`` boxes and no
+    split expected to be cheaper (C_isect n <= C_trav + C_isect cost / A), or one box.
+    Where all centroids coincide, a larger node is split in half, as there.
+    """
+    centre = (lo.astype(np.float64) + hi) * 0.5
+    nodes: list[list] = []   # [lo, hi, left, right, start, count] in depth-first order
+    order: list[int] = []
+    depth = 0
+
+    def build(ids: np.ndarray, level: int) -> int:
+        nonlocal depth
+        k = len(nodes)
+        box_lo, box_hi = lo[ids].min(axis=0), hi[ids].max(axis=0)
+        nodes.append([box_lo, box_hi, -1, -1, 0, 0])
+        m = len(ids)
+        best, split = np.inf, None
+        for a in range(3 if m > 1 else 0):
+            if centre[ids, a].min() == centre[ids, a].max():
+                continue   # no split on this axis (the binned builder's rule)
+            s = ids[np.argsort(centre[ids, a], kind="stable")]
+            left = _half_areas(np.minimum.accumulate(lo[s], axis=0)[:-1],
+                               np.maximum.accumulate(hi[s], axis=0)[:-1])
+            right = _half_areas(np.minimum.accumulate(lo[s][::-1], axis=0)[::-1][1:],
+                                np.maximum.accumulate(hi[s][::-1], axis=0)[::-1][1:])
+            n_left = np.arange(1, m)
+            cost = left * n_left + right * (m - n_left)
+            i = int(np.argmin(cost))
+            if cost[i] < best:
+                best, split = float(cost[i]), (s[:i + 1], s[i + 1:])
+        area = float(_half_areas(box_lo, box_hi))
+        cost_split = c_trav + c_isect * best / (area if area > 0 else 1.0)
+        if m < 2 or (m <= max_leaf and (split is None or c_isect * m <= cost_split)):
+            nodes[k][4:] = [len(order), m]
+            order.extend(int(i) for i in ids)
+            depth = max(depth, level)
+            return k
+        if split is None:   # every centroid in one point: the list split in half
+            split = (ids[:m // 2], ids[m // 2:])
+        nodes[k][2] = build(split[0], level + 1)
+        nodes[k][3] = build(split[1], level + 1)
+        return k
+
+    build(np.arange(len(lo)), 0)
+    cols = list(zip(*nodes, strict=True))
+    return (np.array(cols[0], np.float32).reshape(-1, 3),
+            np.array(cols[1], np.float32).reshape(-1, 3),
+            *(np.array(c, np.int64) for c in cols[2:]), np.array(order, np.int64), depth)
 
 
 def _half_area_jit(lo, hi):
