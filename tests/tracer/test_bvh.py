@@ -469,6 +469,19 @@ def knots_and_ball(knot, fourth: str) -> str:
     return MINIMAL + KNOT_AND_BALL.format(knot=knot, places=places)
 
 
+def _instanced_scene(tmp_path, name: str):
+    """A built-in scene by name, or "knots": :func:`knots_and_ball` with the knot's mesh."""
+    from whitted.reference.cli import resolve_scene
+    from whitted.tracer import load_scene
+
+    if name != "knots":
+        return load_scene(resolve_scene(name))
+    path = tmp_path / "knots.toml"
+    path.write_text(knots_and_ball(resolve_scene("mesh_knot").parent / "meshes" / "knot.ply",
+                                   "knot"))
+    return load_scene(path)
+
+
 @pytest.mark.parametrize("name", ["instances_scaled", "shapes_zoo", "knots"])
 def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     """Where instances block a segment (tracer/geometry.py: a hierarchy of instances walked
@@ -476,17 +489,9 @@ def test_instances_occlusion_agrees_with_their_closest_hit(jit, tmp_path, name):
     group), the answer is the closest hit's: groups of spheres and cylinders instanced
     three times (instances_scaled, shapes_zoo, one a non-uniform scale), and a mesh
     instanced four times beside one ball instanced once, scaled (knots)."""
-    from whitted.reference.cli import resolve_scene
-    from whitted.tracer import load_scene
     from whitted.tracer.geometry import Geometry, _InstanceBlock, _InstanceSetBlock
 
-    if name == "knots":
-        path = tmp_path / "knots.toml"
-        path.write_text(knots_and_ball(resolve_scene("mesh_knot").parent / "meshes" / "knot.ply",
-                                       "knot"))
-        scene = load_scene(path)
-    else:
-        scene = load_scene(resolve_scene(name))
+    scene = _instanced_scene(tmp_path, name)
     geo = Geometry(scene)
     kinds = {type(b) for b in geo.blocks}
     assert _InstanceSetBlock in kinds and (name != "knots" or _InstanceBlock in kinds)
@@ -542,17 +547,10 @@ def test_instances_hit_the_same_whichever_builder_made_their_hierarchy(jit, tmp_
     """The instances' hierarchy built on the host (a few instances) or on the device: each
     ray finds the same nearest hit (t and primitive: the same instances' answers, in
     another order) and the same occlusion."""
-    from whitted.reference.cli import resolve_scene
-    from whitted.tracer import bvh, load_scene
+    from whitted.tracer import bvh
     from whitted.tracer.geometry import Geometry, _InstanceSetBlock
 
-    if name == "knots":
-        path = tmp_path / "knots.toml"
-        path.write_text(knots_and_ball(resolve_scene("mesh_knot").parent / "meshes" / "knot.ply",
-                                       "knot"))
-        scene = load_scene(path)
-    else:
-        scene = load_scene(resolve_scene(name))
+    scene = _instanced_scene(tmp_path, name)
     host = Geometry(scene)
     monkeypatch.setattr(bvh, "SMALL_BOX_SET", 0)
     device = Geometry(scene)
