@@ -473,7 +473,7 @@ def compile_bytecode(root: Path) -> None:
     a checkout edited since its set-up, or a new worktree, then compiles those modules
     in every process it starts, which a user's installed copy does not. Without this,
     each timed process paid that compile (a `whitted render`'s import step, as
-    ``process`` splits it, was a third longer in this checkout)."""
+    ``process`` splits it, was clearly longer in this checkout)."""
     subprocess.run([sys.executable, "-m", "compileall", "-q", "tracer", "reference",
                     "scenes"], cwd=root, check=True, stdout=subprocess.DEVNULL)
 
