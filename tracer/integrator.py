@@ -379,8 +379,8 @@ class Integrator:
         if chunk_samples is None:  # on a CPU, bounded for deep scenes (limits.chunk_samples)
             from whitted.tracer.limits import chunk_samples as cpu_chunk
 
-            chunk_samples = ((1 << 24) if backend.name() == "cuda"
-                             else cpu_chunk(scene.film.max_depth))
+            chunk_samples = ((1 << 24) if backend.name() == "cuda" else
+                             cpu_chunk(scene.film.max_depth, self.materials.has_delta))
         self.chunk_samples = chunk_samples
         if schedule not in SCHEDULES:
             raise ValueError(f"schedule must be one of {', '.join(SCHEDULES)}, not {schedule!r}")

@@ -21,16 +21,20 @@ CHILD = textwrap.dedent("""
     import json, resource, sys
     from whitted.tracer import load_scene
     from whitted.tracer.integrator import Integrator
-    scene = load_scene(sys.argv[2]).with_overrides(size=(1920, 1080), spp=4, max_depth=26)
-    chunk = json.loads(sys.argv[1])
+    chunk, options = json.loads(sys.argv[1]), json.loads(sys.argv[3])
+    scene = load_scene(sys.argv[2]).with_overrides(size=(1920, 1080), **options)
     Integrator(scene, chunk_samples=chunk).render()
     print(json.dumps(resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024))
 """)
 
 
-def peak_bytes(chunk: int | None) -> int:
-    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(chunk), str(SCENE)], check=True,
-                         capture_output=True, text=True).stdout
+def peak_bytes(chunk: int | None, scene: Path = SCENE, **options) -> int:
+    """Peak resident memory of a process that renders ``scene`` at 1920 x 1080 (by default
+    Heckbert's at 4 spp, max_depth 26) with chunks of ``chunk`` samples (None: the rule's)."""
+    options = options or {"spp": 4, "max_depth": 26}
+    out = subprocess.run([sys.executable, "-c", CHILD, json.dumps(chunk), str(scene),
+                          json.dumps(options)], check=True, capture_output=True,
+                         text=True).stdout
     return int(out.strip().splitlines()[-1])
 
 
@@ -41,3 +45,17 @@ def test_deep_render_peak_memory_is_bounded():
     2^21 of before at 4.1 GB (tests/e2e/test_memory.py's peak_bytes(1 << 21)); 2 GiB lies
     between, with a margin for Dr.Jit's allocator."""
     assert peak_bytes(None) < 2 * 1024 ** 3
+
+
+@pytest.mark.slow
+def test_a_flat_chunk_holds_at_most_its_bytes_a_sample():
+    """Where no ray spawns another, a chunk is FLAT_CHUNK_SAMPLES (2^23) samples, on the
+    measure of FLAT_BYTES_PER_SAMPLE (64) each. mesh_knot at 1920 x 1080, 16 spp (33 M
+    samples, 4 rays a lane: the most a sample held of the scenes measured) with that chunk
+    against 2^21: the peaks may differ by at most the 6.3 M samples more in flight times
+    64 bytes (here: 38 bytes a sample)."""
+    from whitted.tracer.limits import CHUNK_SAMPLES, FLAT_BYTES_PER_SAMPLE, FLAT_CHUNK_SAMPLES
+
+    knot = SCENE.parent / "mesh_knot.toml"
+    small, large = (peak_bytes(c, knot, spp=16) for c in (CHUNK_SAMPLES, None))
+    assert large - small <= (FLAT_CHUNK_SAMPLES - CHUNK_SAMPLES) * FLAT_BYTES_PER_SAMPLE

@@ -105,6 +105,24 @@ def test_auto_takes_the_stack_where_rays_recurse():
         Integrator(glass, schedule="megakernel")
 
 
+def test_a_chunk_is_larger_where_no_ray_spawns_another(monkeypatch):
+    """Without mirrors, glass or masks a camera ray ends where it is shaded, and the CPU
+    chunk is FLAT_CHUNK_SAMPLES (tracer.limits, where its memory is measured); where rays
+    spawn children it stays sized for max_depth. Both chunkings give the same image."""
+    from whitted.tracer import backend, limits
+
+    monkeypatch.setattr(backend, "name", lambda: "llvm")   # the CPU's rule, on any backend
+    flat = load_scene(resolve_scene("three_lights"))
+    assert Integrator(flat).chunk_samples == limits.FLAT_CHUNK_SAMPLES > limits.CHUNK_SAMPLES
+    glass = load_scene(resolve_scene("glass_sphere"))
+    for depth in (2, 26):
+        assert Integrator(glass.with_overrides(max_depth=depth)).chunk_samples \
+            == limits.chunk_samples(depth) <= limits.CHUNK_SAMPLES
+    small = flat.with_overrides(size=(40, 30), spp=4)
+    whole = Integrator(small).render().image
+    assert np.array_equal(Integrator(small, chunk_samples=4 * 7).render().image, whole)
+
+
 @pytest.mark.parametrize("schedule", ["stack", "wavefront"])
 @pytest.mark.parametrize("name,jitter", [("area_lights", False), ("emitter_in_glass", True),
                                          ("emitter_in_glass", False),
