@@ -106,15 +106,16 @@ PENDING_BUDGET = 1 << 30
 
 #: Samples of a chunk on a CPU where no ray has a child (no mirror, glass or mask: a camera
 #: ray is shaded and ends), and the bytes such a sample holds in flight (its ray, slot,
-#: radiance, the lane's state; Dr.Jit's buffers). Measured, peak resident memory of the
-#: process at 1920 x 1080, 16 spp, chunks of 2^21 against 2^23 samples (a throwaway
-#: script): three_lights 19, shapes_zoo 28, mesh_knot (4 rays a lane) 38 bytes a sample
-#: more; 64 bounds them, and FLAT_CHUNK_SAMPLES x 64 is the memory CHUNK_SAMPLES x
-#: TRACER_BYTES_PER_SAMPLE allows. Each chunk's kernel is traced anew from Python (about
-#: 30 ms for a mesh scene with instances), so a 640 x 480, 16 spp render of such a scene
-#: takes one chunk rather than three.
-FLAT_CHUNK_SAMPLES = 1 << 23
-FLAT_BYTES_PER_SAMPLE = 64
+#: radiance, the lane's state; Dr.Jit's buffers). Each chunk's kernel is traced anew from
+#: Python, while a process's first render faults in all of a chunk's fresh pages at once;
+#: ``benchmarks/bench_chunks.py`` times both against each other. Its two scenes (640 x 480,
+#: 16 spp, instanced meshes) rendered faster with 2^22 samples than with 2^21, and 2^23 was
+#: faster still for one and slower for the other. Measured, peak resident memory at
+#: 1920 x 1080, 16 spp, chunks of 2^21 against 2^23 (a throwaway script): three_lights 19,
+#: shapes_zoo 28, mesh_knot (4 rays a lane) 38 bytes a sample more; 128 bounds them, and
+#: FLAT_CHUNK_SAMPLES x 128 is the memory CHUNK_SAMPLES x TRACER_BYTES_PER_SAMPLE allows.
+FLAT_CHUNK_SAMPLES = 1 << 22
+FLAT_BYTES_PER_SAMPLE = 128
 
 
 def chunk_samples(max_depth: int, spawns: bool = True) -> int:

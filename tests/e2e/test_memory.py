@@ -49,11 +49,11 @@ def test_deep_render_peak_memory_is_bounded():
 
 @pytest.mark.slow
 def test_a_flat_chunk_holds_at_most_its_bytes_a_sample():
-    """Where no ray spawns another, a chunk is FLAT_CHUNK_SAMPLES (2^23) samples, on the
-    measure of FLAT_BYTES_PER_SAMPLE (64) each. mesh_knot at 1920 x 1080, 16 spp (33 M
+    """Where no ray spawns another, a chunk is FLAT_CHUNK_SAMPLES (2^22) samples, on the
+    measure of FLAT_BYTES_PER_SAMPLE (128) each. mesh_knot at 1920 x 1080, 16 spp (33 M
     samples, 4 rays a lane: the most a sample held of the scenes measured) with that chunk
-    against 2^21: the peaks may differ by at most the 6.3 M samples more in flight times
-    64 bytes (here: 38 bytes a sample)."""
+    against 2^21: the peaks may differ by at most the 2.1 M samples more in flight times
+    128 bytes (measured between 2^21 and 2^23: 38 bytes a sample)."""
     from whitted.tracer.limits import CHUNK_SAMPLES, FLAT_BYTES_PER_SAMPLE, FLAT_CHUNK_SAMPLES
 
     knot = SCENE.parent / "mesh_knot.toml"
