@@ -108,12 +108,14 @@ PENDING_BUDGET = 1 << 30
 #: ray is shaded and ends), and the bytes such a sample holds in flight (its ray, slot,
 #: radiance, the lane's state; Dr.Jit's buffers). Each chunk's kernel is traced anew from
 #: Python, while a process's first render faults in all of a chunk's fresh pages at once;
-#: ``benchmarks/bench_chunks.py`` times both against each other. Its two scenes (640 x 480,
-#: 16 spp, instanced meshes) rendered faster with 2^22 samples than with 2^21, and 2^23 was
-#: faster still for one and slower for the other. Measured, peak resident memory at
-#: 1920 x 1080, 16 spp, chunks of 2^21 against 2^23 (a throwaway script): three_lights 19,
-#: shapes_zoo 28, mesh_knot (4 rays a lane) 38 bytes a sample more; 128 bounds them, and
-#: FLAT_CHUNK_SAMPLES x 128 is the memory CHUNK_SAMPLES x TRACER_BYTES_PER_SAMPLE allows.
+#: ``benchmarks/bench_chunks.py`` times both against each other. On its two scenes (640 x
+#: 480, 16 spp, instanced meshes), 2^22 samples rendered the instanced torus faster than
+#: 2^21 in each run, and the knot within the noise (faster in one run, slower in the
+#: next); 2^23 was faster still for the torus and slower for the knot. Measured, peak
+#: resident memory at 1920 x 1080, 16 spp, chunks of 2^21 against 2^23 (a throwaway
+#: script): three_lights 19, shapes_zoo 28, mesh_knot (4 rays a lane) 38 bytes a sample
+#: more; 128 bounds them, and FLAT_CHUNK_SAMPLES x 128 is the memory CHUNK_SAMPLES x
+#: TRACER_BYTES_PER_SAMPLE allows.
 FLAT_CHUNK_SAMPLES = 1 << 22
 FLAT_BYTES_PER_SAMPLE = 128
 
