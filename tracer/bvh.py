@@ -400,7 +400,7 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
     n = dr.width(lo)
     nbmax = max(bins, 8)
     tid = dr.arange(U, n)
-    seg = dr.zeros(U, n)
+    seg = upload(U, np.zeros(n, np.uint32), np.uint32)  # memory, as later levels' (not 0)
     order = dr.zeros(U, n)
     dr.eval(lo, hi, tid, seg, order)
     h_cnt = np.array([n], np.int64)
@@ -412,22 +412,31 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         # with values alive from the levels before, which made the kernels of every level
         # differ and be compiled anew (bench_speed.py process, a cold kernel cache).
         backend.new_scope()
-        cnt = upload(U, h_cnt, np.uint32)
         h_first = np.cumsum(h_cnt) - h_cnt
-        first = upload(U, h_first, np.uint32)
+        # A level's arrays on the device have two nodes at least (_padded): the root's
+        # level gets an empty second node, first 0, no triangles, a leaf, dropped below.
+        S_d = max(S, 2)
+        cnt = upload(U, _padded(h_cnt, S_d), np.uint32)
+        first = upload(U, _padded(h_first, S_d), np.uint32)
         nb = dr.select(cnt <= 8, U(4), dr.select(cnt <= 32, U(8), U(bins)))
         big = cnt > chunk
         dr.eval(nb, big)
         # Small nodes, a lane each: box, centroid box and cheapest split. Where every
         # node is large (the top levels), _large_nodes fills every entry: nothing to trace.
         h_big = np.flatnonzero(h_cnt > chunk)
-        if len(h_big) < S:
-            best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _small_nodes(
-                lo, hi, first, cnt, nb, ~big, nbmax)
+        if len(h_big) < S_d:
+            small = _small_nodes(lo, hi, first, cnt, nb, ~big, nbmax)
+            # All seven results of the one loop in one kernel, whatever comes next: left
+            # lazy, _large_nodes's scatters evaluated them one at a time (the loop traced,
+            # compiled and run once for each), and the next level's leaf test folded them
+            # into a kernel of its own (a cold build compiled four variants of the loop).
+            dr.eval(*small)
+            best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = small
         else:
-            best, best_axis, best_bin = dr.full(F, dr.inf, S), dr.zeros(U, S), dr.zeros(U, S)
-            box_lo, box_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
-            c_lo, c_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
+            best, best_axis, best_bin = (dr.full(F, dr.inf, S_d), dr.zeros(U, S_d),
+                                         dr.zeros(U, S_d))
+            box_lo, box_hi = dr.full(A3, dr.inf, S_d), dr.full(A3, -dr.inf, S_d)
+            c_lo, c_hi = dr.full(A3, dr.inf, S_d), dr.full(A3, -dr.inf, S_d)
         if len(h_big):
             best, best_axis, best_bin, box_lo, box_hi, c_lo, c_hi = _large_nodes(
                 lo, hi, h_first, h_cnt, h_big, nbmax, bins, chunk,
@@ -441,14 +450,14 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         leaf = (cnt <= max_leaf) & (no_sah | (c_isect * F(cnt) <= split_cost))
         leaf |= cnt < 2
         dr.eval(leaf, no_sah, c_lo, scale, best_axis, best_bin, box_lo, box_hi)
-        h_leaf = leaf.numpy()
+        h_leaf = leaf.numpy()[:S]
         split = ~h_leaf
         ns = int(np.count_nonzero(split))
         h_rank = np.cumsum(split) - split
         h_start = placed + np.cumsum(np.where(h_leaf, h_cnt, 0)) - np.where(h_leaf, h_cnt, 0)
         left = np.where(h_leaf, -1, base + S + 2 * h_rank)
         levels.append(dict(node=base + np.arange(S), left=left,
-                           lo=backend.host3(box_lo), hi=backend.host3(box_hi),
+                           lo=backend.host3(box_lo)[:S], hi=backend.host3(box_hi)[:S],
                            right=np.where(h_leaf, -1, left + 1),
                            start=np.where(h_leaf, h_start, 0),
                            count=np.where(h_leaf, h_cnt, 0)))
@@ -458,7 +467,7 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         # Each triangle: its rank r in its node; a leaf's go to order[start + r].
         r = dr.arange(U, N) - dr.gather(U, first, seg)
         t_leaf = dr.gather(B, leaf, seg)
-        start = upload(U, h_start, np.uint32)
+        start = upload(U, _padded(h_start, S_d), np.uint32)
         dr.scatter(order, tid, dr.gather(U, start, seg, t_leaf) + r, t_leaf)
         if ns == 0:
             dr.eval(order)
@@ -471,7 +480,7 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
                       _component(A3(*(dr.gather(F, v, seg) for v in scale)), ax),
                       dr.gather(U, nb, seg)) <= dr.gather(U, best_bin, seg)
         half = r < dr.gather(U, cnt, seg) // 2
-        last = first + cnt - 1
+        last = first + dr.maximum(cnt, 1) - 1  # the empty pad reads its first, 0
         for attempt in range(2):
             go_left = dr.select(dr.gather(B, no_sah, seg), half, by_bin) & ~t_leaf
             lefts = dr.prefix_sum(dr.select(go_left, U(1), U(0)))  # before each triangle
@@ -480,22 +489,22 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
             n_left = (dr.gather(U, lefts, last)
                       + dr.select(dr.gather(B, go_left, last), U(1), U(0))
                       - dr.gather(U, lefts, first))
-            h_nl = n_left.numpy().astype(np.int64)
+            h_nl = n_left.numpy()[:S].astype(np.int64)
             # A split that leaves a child empty would repeat forever; the binning and
             # this partition compute the same bins, but should they ever disagree, such
             # a node is split in half instead (never seen: a guard, not a path).
             empty = split & ((h_nl == 0) | (h_nl == h_cnt))
             if attempt or not empty.any():
                 break
-            no_sah = no_sah | B(empty)
+            no_sah = no_sah | B(_padded(empty, S_d))
         if empty.any():
             raise RuntimeError("BVH build: a split left a child empty")
         split_first = np.cumsum(np.where(split, h_cnt, 0)) - np.where(split, h_cnt, 0)
         l_before = lefts - dr.gather(U, lefts, dr.gather(U, first, seg))
         t_nl = dr.gather(U, n_left, seg)
-        dest = (dr.gather(U, upload(U, split_first, np.uint32), seg)
+        dest = (dr.gather(U, upload(U, _padded(split_first, S_d), np.uint32), seg)
                 + dr.select(go_left, l_before, t_nl + r - l_before))
-        new_seg = 2 * dr.gather(U, upload(U, h_rank, np.uint32), seg) + dr.select(
+        new_seg = 2 * dr.gather(U, upload(U, _padded(h_rank, S_d), np.uint32), seg) + dr.select(
             go_left, U(0), U(1))
         keep = ~t_leaf
         N_next = N - n_leaf
@@ -510,23 +519,43 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
     return levels, order.numpy().astype(np.int64)
 
 
+def _padded(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` with zeros (False) appended up to ``n`` entries: a node array for the device.
+
+    Dr.Jit reads an array of one entry as a scalar (loaded once for every lane, a gather
+    from it the value itself), so a level of one node, the root, traced kernels of its
+    own: a cold build compiled a dozen kernels twice, and a small mesh's one level
+    compiled the small nodes' loop (the largest kernel) in a variant no other build
+    shares (issue 33). With two entries at least, every level traces the same kernels.
+    """
+    if len(a) >= n:
+        return a
+    return np.concatenate([a, np.zeros(n - len(a), a.dtype)])
+
+
 def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, chunk, small):
     """Box, centroid box and cheapest split of the large nodes ``h_big`` (host indices).
 
     ``small`` holds the per-node results of :func:`_small_nodes` (valid for the
-    other nodes); the large nodes' entries are replaced.
+    other nodes); the large nodes' entries are replaced. The arrays of one entry a large
+    node have two at least (:func:`_padded`): a level of one large node gets an empty
+    second, no chunks, whose results are not written.
     """
     F, U, A3 = jit.Float, jit.UInt32, jit.Array3f
+    m = len(h_big)
+    m_d = max(m, 2)
     # Chunk k of a node of nc chunks holds its triangles k, k + nc, k + 2 nc, ...: the
-    # lanes of a SIMD packet, consecutive chunks, then read consecutive triangles.
+    # lanes of a SIMD packet, consecutive chunks, then read consecutive triangles. A
+    # large node has two chunks at least, so every chunk array has two entries too.
     nc = (h_cnt[h_big] + chunk - 1) // chunk  # chunks per large node (chunk: _chunk())
     ch_node = np.repeat(np.arange(len(h_big)), nc)
     ch_k = np.arange(len(ch_node)) - np.repeat(np.cumsum(nc) - nc, nc)
     ch_first = h_first[h_big][ch_node] + ch_k
     ch_stride = nc[ch_node]
     ch_cnt = (h_cnt[h_big][ch_node] - ch_k + ch_stride - 1) // ch_stride
-    n_first = upload(U, np.cumsum(nc) - nc, np.uint32)  # a node's first chunk
-    n_nc = upload(U, nc, np.uint32)
+    nc_d = _padded(nc, m_d)
+    n_first = upload(U, np.cumsum(nc_d) - nc_d, np.uint32)  # a node's first chunk
+    n_nc = upload(U, nc_d, np.uint32)
     cf, cc, cs = (upload(U, a, np.uint32) for a in (ch_first, ch_cnt, ch_stride))
     # Chunks' boxes, then each node's.
     k_lo, k_hi, k_clo, k_chi = _chunk_boxes(lo, hi, cf, cc, cs)
@@ -541,32 +570,32 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, chunk, small):
     k_n, k_blo, k_bhi = _chunk_bins(lo, hi, cf, cc, cs, dr.gather(A3, c_lo, node),
                                     dr.gather(A3, scale, node), nb, nbmax)
     dr.eval(k_n, k_blo, k_bhi)
-    q = dr.arange(U, len(h_big) * per)
+    q = dr.arange(U, m_d * per)
     n_bins, bl, bh = _sum_bin_chunks(q // per, q % per, n_first, n_nc, per, k_n, k_blo, k_bhi)
     dr.eval(n_bins, bl, bh)
-    m = len(h_big)
     # The count of large nodes an input of the kernels, not a constant in them: the levels
     # then share their kernels (a cold build compiled them anew for each level, issue 33).
-    m_in = dr.opaque(U, m)
-    cnt = upload(U, h_cnt[h_big], np.uint32)
-    best = dr.full(F, dr.inf, m)
-    best_axis, best_bin = dr.zeros(U, m), dr.zeros(U, m)
+    m_in = dr.opaque(U, m_d)
+    cnt = upload(U, _padded(h_cnt[h_big], m_d), np.uint32)
+    best = dr.full(F, dr.inf, m_d)
+    best_axis, best_bin = dr.zeros(U, m_d), dr.zeros(U, m_d)
     # The three axes' sweeps in one call, lane a m + i for axis a of node i.
-    q = dr.arange(U, 3 * m)
+    q = dr.arange(U, 3 * m_d)
     costs, ats = _sweep(n_bins, bl, bh, (q % m_in) * per + (q // m_in) * nbmax,
-                        dr.full(U, bins, 3 * m), dr.gather(U, cnt, q % m_in))
+                        dr.full(U, bins, 3 * m_d), dr.gather(U, cnt, q % m_in))
     dr.eval(costs, ats)
     for a in range(3):
-        cost = dr.gather(F, costs, dr.arange(U, m) + a * m_in)
-        at = dr.gather(U, ats, dr.arange(U, m) + a * m_in)
+        cost = dr.gather(F, costs, dr.arange(U, m_d) + a * m_in)
+        at = dr.gather(U, ats, dr.arange(U, m_d) + a * m_in)
         better = (scale[a] > 0) & (cost < best)
         best = dr.select(better, cost, best)
         best_axis = dr.select(better, U(a), best_axis)
         best_bin = dr.select(better, at, best_bin)
     out = list(small)
-    idx = upload(U, h_big, np.uint32)
+    idx = upload(U, _padded(h_big, m_d), np.uint32)
+    real = dr.arange(U, m_d) < dr.opaque(U, m)  # not the pad
     for i, v in enumerate((best, best_axis, best_bin, b_lo, b_hi, c_lo, c_hi)):
-        dr.scatter(out[i], v, idx)
+        dr.scatter(out[i], v, idx, real)
     dr.eval(*out)
     return tuple(out)
 

@@ -582,3 +582,94 @@ def test_builds_of_two_mesh_sizes_launch_the_same_kernels(jit):
             dr.set_flag(dr.JitFlag.KernelHistory, False)
 
     assert kernels(300, 150) == kernels(200, 100)
+
+
+def _clusters(big: int, small: int):
+    """Triangles in two unit cubes far apart, ``big`` in one and ``small`` in the other (as
+    build_bvh's p0, p1, p2): the root splits them."""
+    rng = np.random.default_rng(5)
+    def cluster(n, at):
+        return [(rng.random((n, 3)) + at).astype(np.float32) for _ in range(3)]
+    b, s = cluster(big, 0.0), cluster(small, 100.0)
+    return tuple(np.concatenate([u, v]) for u, v in zip(b, s, strict=True))
+
+
+def test_a_levels_small_nodes_run_their_loop_in_one_kernel(jit):
+    """The small nodes' loop (box, bins and three sweeps: the build's one kernel of several
+    hundred operations; the next largest, the sum of a large node's chunk bins, has about
+    260) is traced as one kernel for all its results, also on a level that mixes large
+    and small nodes. Left lazy, its results were evaluated one by one by the large nodes'
+    scatters, and folded into the leaf test on the other levels: four variants (issue 33).
+    Two clusters: the root's children are one large node (more than a chunk of
+    triangles) and one small."""
+    from whitted.tracer.bvh import _chunk
+
+    p0, p1, p2 = _clusters(5 * _chunk(), _chunk() // 2)
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # clears it
+    try:
+        build_bvh(p0, p1, p2)
+        ops = {k["hash"]: k["operation_count"] for k in dr.kernel_history()
+               if k["type"] == dr.KernelType.JIT}
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    second, largest = sorted(ops.values())[-2:]
+    assert largest > 2 * second, sorted(ops.values())   # one loop kernel, none like it
+
+
+def _strip(n: int):
+    """``n`` triangles side by side along x, each in its own plane x = const: binned splits
+    fall near the middle of a node, so its halves hold about as many triangles."""
+    x = ((np.arange(n) + 0.5) / n).astype(np.float32)
+    o, one = np.zeros(n, np.float32), np.ones(n, np.float32)
+    return (np.stack([x, o, o], 1), np.stack([x, one, o], 1), np.stack([x, o, one], 1))
+
+
+@pytest.mark.parametrize("case", ["large root", "large root over a mixed level", "small root"])
+def test_the_root_level_launches_the_kernels_of_the_levels_below(jit, monkeypatch, case):
+    """Dr.Jit reads an array of one entry as a scalar, so the root's level (one node) traced
+    kernels of its own, each compiled once more in a cold process; its arrays now hold
+    an empty second node (bvh._padded), and every kernel it launches is launched again
+    by a level below. A large root: a strip of six chunks of triangles, whose levels
+    below hold two large nodes, then four, then only small ones; one whose next level
+    holds one large node and one small (two clusters); a small root (a quarter of a
+    chunk)."""
+    from whitted.tracer import backend, bvh
+
+    levels = []
+    new_scope = backend.new_scope
+
+    def next_level():  # _split_levels opens each level with a scope
+        levels.append({k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT})
+        new_scope()
+
+    monkeypatch.setattr(backend, "new_scope", next_level)
+    chunk = bvh._chunk()
+    p0, p1, p2 = {"large root": lambda: _strip(6 * chunk),
+                  "large root over a mixed level": lambda: _clusters(5 * chunk, chunk // 2),
+                  "small root": lambda: _clusters(chunk // 4, 0)}[case]()
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # clears it
+    try:
+        build_bvh(p0, p1, p2)
+        next_level()
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    root, below = levels[1], set().union(*levels[2:])
+    assert len(levels) > 4 and root   # the triangles' boxes, the root, three levels below
+    assert root <= below, f"{len(root - below)} of the root level's {len(root)} kernels"
+
+
+def test_a_build_reads_within_its_arrays(jit, capfd):
+    """Dr.Jit's debug mode checks each gather's index against its array and reports a read
+    out of bounds. The empty node that pads the root's level has no last triangle: the
+    partition reads its first instead (a read at 2^32 - 1 before)."""
+    from whitted.tracer.bvh import _chunk
+
+    dr.set_flag(dr.JitFlag.Debug, True)
+    try:
+        for p in (_strip(3 * _chunk()), _clusters(_chunk() // 4, 0), _clusters(3, 2)):
+            build_bvh(*p)
+    finally:
+        dr.set_flag(dr.JitFlag.Debug, False)
+    assert "out-of-bounds" not in capfd.readouterr().err
