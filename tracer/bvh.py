@@ -422,7 +422,8 @@ def _split_levels(lo, hi, bins, max_leaf, c_trav, c_isect):
         big = cnt > chunk
         dr.eval(nb, big)
         # Small nodes, a lane each: box, centroid box and cheapest split. Where every
-        # node is large (the top levels), _large_nodes fills every entry: nothing to trace.
+        # node is large (the top levels), _large_nodes fills every entry: nothing to trace
+        # (a large root's pad is small: the loop runs for it, a kernel the levels below use).
         h_big = np.flatnonzero(h_cnt > chunk)
         if len(h_big) < S_d:
             small = _small_nodes(lo, hi, first, cnt, nb, ~big, nbmax)
@@ -524,9 +525,9 @@ def _padded(a: np.ndarray, n: int) -> np.ndarray:
 
     Dr.Jit reads an array of one entry as a scalar (loaded once for every lane, a gather
     from it the value itself), so a level of one node, the root, traced kernels of its
-    own: a cold build compiled a dozen kernels twice, and a small mesh's one level
-    compiled the small nodes' loop (the largest kernel) in a variant no other build
-    shares (issue 33). With two entries at least, every level traces the same kernels.
+    own: a cold build compiled a dozen kernels twice, and a small root compiled the small
+    nodes' loop (the largest kernel) in a variant no other level shares (issue 33). With
+    two entries at least, every level traces the same kernels.
     """
     if len(a) >= n:
         return a
