@@ -26,6 +26,20 @@ for _folder in sorted(p for p in Path(__file__).resolve().parent.rglob("*")
         sys.path.append(str(_folder))
 
 
+def jit_kernels(fn) -> list[dict]:
+    """Dr.Jit's records of the JIT kernels ``fn()`` launches, in order (its kernel history,
+    on for the call only; a record's "hash", "operation_count", "ir", "cache_hit"...)."""
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.KernelHistory, True)
+    dr.kernel_history()  # clears it
+    try:
+        fn()
+        return [k for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT]
+    finally:
+        dr.set_flag(dr.JitFlag.KernelHistory, False)
+
+
 def pytest_addoption(parser):
     parser.addoption("--backend", default=None, choices=("auto", "llvm", "cuda"),
                      help="Dr.Jit backend for the tests (default: WHITTED_BACKEND or auto)")

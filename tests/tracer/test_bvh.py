@@ -13,7 +13,7 @@ import math
 import drjit as dr
 import numpy as np
 import pytest
-from conftest import MINIMAL
+from conftest import MINIMAL, jit_kernels
 
 from whitted.tracer.bvh import BVH, INVALID, build_bvh, sah_cost
 from whitted.tracer.shapes import triangle as tri_f
@@ -573,13 +573,8 @@ def test_builds_of_two_mesh_sizes_launch_the_same_kernels(jit):
     launch the same kernels. Before, each count compiled its own (issue 33)."""
     def kernels(nu, nv):
         p, f = torus(nu, nv)
-        dr.set_flag(dr.JitFlag.KernelHistory, True)
-        dr.kernel_history()  # clears it
-        try:
-            build_bvh(p[f[:, 0]], p[f[:, 1]], p[f[:, 2]])
-            return {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
-        finally:
-            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        return {k["hash"] for k in jit_kernels(lambda: build_bvh(p[f[:, 0]], p[f[:, 1]],
+                                                                 p[f[:, 2]]))}
 
     assert kernels(300, 150) == kernels(200, 100)
 
@@ -604,15 +599,8 @@ def test_a_levels_small_nodes_run_their_loop_in_one_kernel(jit):
     triangles) and one small."""
     from whitted.tracer.bvh import _chunk
 
-    p0, p1, p2 = _clusters(5 * _chunk(), _chunk() // 2)
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()  # clears it
-    try:
-        build_bvh(p0, p1, p2)
-        ops = {k["hash"]: k["operation_count"] for k in dr.kernel_history()
-               if k["type"] == dr.KernelType.JIT}
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    p = _clusters(5 * _chunk(), _chunk() // 2)
+    ops = {k["hash"]: k["operation_count"] for k in jit_kernels(lambda: build_bvh(*p))}
     second, largest = sorted(ops.values())[-2:]
     assert largest > 2 * second, sorted(ops.values())   # one loop kernel, none like it
 
@@ -639,22 +627,16 @@ def test_the_root_level_launches_the_kernels_of_the_levels_below(jit, monkeypatc
     levels = []
     new_scope = backend.new_scope
 
-    def next_level():  # _split_levels opens each level with a scope
+    def next_level():  # _split_levels opens each level with a scope; the history so far
         levels.append({k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT})
         new_scope()
 
     monkeypatch.setattr(backend, "new_scope", next_level)
     chunk = bvh._chunk()
-    p0, p1, p2 = {"large root": lambda: _strip(6 * chunk),
-                  "large root over a mixed level": lambda: _clusters(5 * chunk, chunk // 2),
-                  "small root": lambda: _clusters(chunk // 4, 0)}[case]()
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()  # clears it
-    try:
-        build_bvh(p0, p1, p2)
-        next_level()
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    p = {"large root": lambda: _strip(6 * chunk),
+         "large root over a mixed level": lambda: _clusters(5 * chunk, chunk // 2),
+         "small root": lambda: _clusters(chunk // 4, 0)}[case]()
+    levels.append({k["hash"] for k in jit_kernels(lambda: build_bvh(*p))})  # the last level
     root, below = levels[1], set().union(*levels[2:])
     assert len(levels) > 4 and root   # the triangles' boxes, the root, three levels below
     assert root <= below, f"{len(root - below)} of the root level's {len(root)} kernels"

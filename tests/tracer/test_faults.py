@@ -2,10 +2,9 @@
 
 import re
 
-import drjit as dr
 import numpy as np
 import pytest
-from conftest import SCENES
+from conftest import SCENES, jit_kernels
 
 import whitted.reference.mutants  # noqa: F401  (declares the catalog's ids)
 from whitted.tracer import faults, load_scene
@@ -20,20 +19,13 @@ def _render(name, size=(48, 36), spp=4):
 def _kernels(name):
     """The IR of every kernel a small render launches, without what Dr.Jit decides at run
     time from the buffers it is handed (their alignment) and the hash in the name."""
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    try:
-        dr.kernel_history()
-        _render(name)
-        irs = []
-        for k in dr.kernel_history():
-            if k["type"] == dr.KernelType.JIT:
-                t = k["ir"].getvalue()
-                t = re.sub(r"drjit_[0-9a-f]{32}", "drjit_K", t)
-                t = re.sub(r"align \d+", "align A", t)
-                irs.append(re.sub(r"i32 \d+, <(\d+) x i1>", r"i32 A, <\1 x i1>", t))
-        return irs
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    irs = []
+    for k in jit_kernels(lambda: _render(name)):
+        t = k["ir"].getvalue()
+        t = re.sub(r"drjit_[0-9a-f]{32}", "drjit_K", t)
+        t = re.sub(r"align \d+", "align A", t)
+        irs.append(re.sub(r"i32 \d+, <(\d+) x i1>", r"i32 A, <\1 x i1>", t))
+    return irs
 
 
 def test_switching_off_restores_the_image_bit_for_bit():
@@ -152,11 +144,5 @@ def test_a_scene_read_again_with_a_placement_bug_shares_the_sweeps_kernel(name, 
 def _shading_kernel(scene) -> str:
     """The hash of the largest kernel a render launches: its shading kernel (a moved mesh
     builds its own BVH first, in kernels of its own)."""
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()
-    try:
-        Integrator(scene).render()
-        return max((k["operation_count"], k["hash"]) for k in dr.kernel_history()
-                   if k["type"] == dr.KernelType.JIT and "hash" in k)[1]
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return max((k["operation_count"], k["hash"])
+               for k in jit_kernels(lambda: Integrator(scene).render()) if "hash" in k)[1]

@@ -10,6 +10,7 @@ kernel hash by chance, and LLVM compiled the kernel again.
 import drjit as dr
 import numpy as np
 import pytest
+from conftest import jit_kernels
 
 from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from whitted.reference.cli import resolve_scene
@@ -19,13 +20,7 @@ from whitted.tracer.integrator import Integrator
 
 
 def _hashes(fn) -> set:
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()  # clears it
-    try:
-        fn()
-        return {k["hash"] for k in dr.kernel_history() if k["type"] == dr.KernelType.JIT}
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return {k["hash"] for k in jit_kernels(fn)}
 
 
 def test_upload_places_every_array_on_a_64_byte_boundary():
@@ -95,14 +90,7 @@ def test_nearby_max_depths_share_the_stack_kernel():
 
 def _launches(fn) -> list:
     """(hash, operation count) of each JIT kernel ``fn`` launched, in order."""
-    dr.set_flag(dr.JitFlag.KernelHistory, True)
-    dr.kernel_history()
-    try:
-        fn()
-        return [(k["hash"], k["operation_count"]) for k in dr.kernel_history()
-                if k["type"] == dr.KernelType.JIT and "hash" in k]
-    finally:
-        dr.set_flag(dr.JitFlag.KernelHistory, False)
+    return [(k["hash"], k["operation_count"]) for k in jit_kernels(fn) if "hash" in k]
 
 
 @pytest.mark.parametrize("name", ["mesh_knot", "three_lights"])

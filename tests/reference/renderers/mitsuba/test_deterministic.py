@@ -16,7 +16,7 @@ import tomllib
 import drjit as dr
 import numpy as np
 import pytest
-from conftest import SCENES
+from conftest import SCENES, jit_kernels
 
 from whitted.reference.renderers.mitsuba.deterministic import SAMPLE_MAPS, render_deterministic
 from whitted.reference.teaching.fresnel_curves import exact64, float32_tolerance
@@ -392,14 +392,9 @@ def test_the_reference_traces_every_film_size_with_the_same_ray_tree_kernels(nam
     base = at_strata_centres(load_scene(SCENES / f"{name}.toml"))
 
     def big_kernels(size):
-        dr.set_flag(dr.JitFlag.KernelHistory, True)
-        dr.kernel_history()
-        try:
-            render_deterministic(base.with_overrides(size=size, spp=16))
-            kernels = [k["ir"].getvalue() for k in dr.kernel_history()
-                       if k["type"] == dr.KernelType.JIT and k["operation_count"] > 200]
-        finally:
-            dr.set_flag(dr.JitFlag.KernelHistory, False)
+        kernels = [k["ir"].getvalue() for k in jit_kernels(
+            lambda: render_deterministic(base.with_overrides(size=size, spp=16)))
+            if k["operation_count"] > 200]
         return sorted(sorted(Counter(re.sub(r"%[A-Za-z_]+\d*|@drjit_\w+", "%", line)
                                      for line in ir.splitlines()).items())
                       for ir in kernels)
