@@ -153,30 +153,87 @@ def _system_candidates() -> list[Candidate]:
     return found
 
 
-def _probe(path: str) -> bool:
-    """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child."""
+#: The probe's program: Dr.Jit loads the library and runs a kernel with dr.minimum.
+_PROBE_CODE = ("import drjit as dr, drjit.llvm as m\n"
+               "assert dr.has_backend(dr.JitBackend.LLVM)\n"
+               "x = m.Float([1, 2, 3])\n"
+               "y = dr.minimum(x, 2.0) + dr.maximum(x, 2.0)\n"
+               "assert y.numpy().tolist() == [3, 4, 5]\n")
+#: How long a probe may take before its library counts as not loading (seconds).
+PROBE_TIMEOUT = 120
+#: Probe children started ahead by :func:`start_probe`, by path: :func:`_probe` waits for
+#: one of these rather than starting another.
+_running: dict[str, subprocess.Popen] = {}
+
+
+def _spawn(path: str) -> subprocess.Popen:
+    """The probe's child process for ``path``, started (its output dropped)."""
+    return subprocess.Popen([sys.executable, "-c", _PROBE_CODE],
+                            env=dict(os.environ, DRJIT_LIBLLVM_PATH=path),
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+
+
+def _probe_key(path: str) -> str:
     # Keyed by the path as given: the same file reached through a link elsewhere
     # can fail where the original loads (its $ORIGIN-relative dependencies).
-    key = f"{os.path.abspath(path)}:{_mtime(path)}"
+    return f"{os.path.abspath(path)}:{_mtime(path)}"
+
+
+def _probe(path: str) -> bool:
+    """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child.
+    A child :func:`start_probe` started for ``path`` is waited for instead."""
+    key = _probe_key(path)
     results = _read_probe_cache()
     if key in results:
         return results[key]
-    code = ("import drjit as dr, drjit.llvm as m\n"
-            "assert dr.has_backend(dr.JitBackend.LLVM)\n"
-            "x = m.Float([1, 2, 3])\n"
-            "y = dr.minimum(x, 2.0) + dr.maximum(x, 2.0)\n"
-            "assert y.numpy().tolist() == [3, 4, 5]\n")
-    env = dict(os.environ, DRJIT_LIBLLVM_PATH=path)
+    child = _running.pop(path, None)
     try:
-        r = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
-                           timeout=120)
-        ok = r.returncode == 0
-    except (OSError, subprocess.TimeoutExpired):
+        child = child or _spawn(path)
+        ok = child.wait(timeout=PROBE_TIMEOUT) == 0
+    except subprocess.TimeoutExpired:
+        child.kill()
+        child.wait()
+        ok = False
+    except OSError:
         ok = False
     results[key] = ok
     if cache.folder(cache.home()) is not None:
         cache.write_bytes(_probe_cache_file(), json.dumps(results).encode())
     return ok
+
+
+def start_probe() -> None:
+    """Start the child process that :func:`configure` will wait for first, and return.
+
+    A process whose probe answer is not cached yet (a fresh machine, CI's case) spends
+    about 0.2 s on it: a Python start, Dr.Jit's import and a small kernel. Started
+    before a command reads its scene, the probe runs on another core meanwhile, and
+    :func:`configure` finds it running or done. Nothing is started where ``drjit`` is
+    imported or a library was already chosen, or where :func:`configure` needs no child
+    (its first candidate is refused by name, or its answer is cached). A command that
+    stops before :func:`configure` leaves its child to finish alone; the child only
+    loads the library and exits.
+    """
+    if _chosen is not None or _error is not None or "drjit" in sys.modules:
+        return
+    _start_first_probe(os.environ)
+
+
+def _start_first_probe(env) -> str | None:
+    """:func:`start_probe`'s work: the path of the child started, or None."""
+    results = _read_probe_cache()
+    for c in _ranked(env):
+        if c.path in _running:
+            return None
+        if _refused_by_name(c) is not None:
+            continue
+        answer = results.get(_probe_key(c.path))
+        if answer is True:
+            return None   # configure() chooses it without a child
+        if answer is None:
+            _running[c.path] = _spawn(c.path)
+            return c.path
+    return None
 
 
 def _mtime(path: str) -> int:
@@ -206,6 +263,15 @@ def _read_probe_cache() -> dict[str, bool]:
     return results
 
 
+def _refused_by_name(c: Candidate) -> str | None:
+    """Why ``c`` cannot serve Dr.Jit 1.5 judging by its version alone, or None."""
+    if c.major is not None and c.major in KNOWN_BAD:
+        return KNOWN_BAD[c.major]
+    if c.major is not None and c.major < 14:
+        return "is too old"
+    return None
+
+
 def _rejection(c: Candidate) -> str | None:
     """Why ``c`` cannot serve Dr.Jit 1.5, or None when it works.
 
@@ -214,10 +280,9 @@ def _rejection(c: Candidate) -> str | None:
     since a library of a good version can still fail to load (a missing
     dependency such as libc++).
     """
-    if c.major is not None and c.major in KNOWN_BAD:
-        return KNOWN_BAD[c.major]
-    if c.major is not None and c.major < 14:
-        return "is too old"
+    why = _refused_by_name(c)
+    if why is not None:
+        return why
     if not _probe(c.path):
         return "does not load in drjit 1.5"
     return None
@@ -228,6 +293,25 @@ def _describe(c: Candidate, why: str | None = None) -> str:
     if why and c.major not in KNOWN_BAD:
         name += f" ({why})"
     return name
+
+
+def _ranked(env) -> list[Candidate]:
+    """The candidates in the order :func:`find_libllvm` tries them: ``DRJIT_LIBLLVM_PATH``
+    alone when set, else the packaged library first, then the newest (17 and 18 are
+    untested, so after 19 and newer)."""
+    explicit = env.get("DRJIT_LIBLLVM_PATH")
+    if explicit:
+        return [Candidate(explicit, llvm_major(explicit), "DRJIT_LIBLLVM_PATH")] \
+            if os.path.isfile(explicit) else []
+    search = env.get("WHITTED_LLVM_SEARCH")
+    if search is not None:
+        candidates = _dir_candidates([d for d in search.split(os.pathsep) if d],
+                                     "WHITTED_LLVM_SEARCH")
+    else:
+        candidates = _package_candidates() + _system_candidates()
+    return sorted(candidates, key=lambda c: (c.source != "karellen-llvm-core",
+                                             (c.major or 0) < KNOWN_GOOD_FROM,
+                                             -(c.major or 0)))
 
 
 def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
@@ -251,18 +335,8 @@ def find_libllvm(env: dict[str, str] | None = None) -> Candidate:
                 f"point it to libLLVM {KNOWN_GOOD_FROM} or newer ({INSTALL_HINT})")
         return c
 
-    search = env.get("WHITTED_LLVM_SEARCH")
-    if search is not None:
-        candidates = _dir_candidates([d for d in search.split(os.pathsep) if d],
-                                     "WHITTED_LLVM_SEARCH")
-    else:
-        candidates = _package_candidates() + _system_candidates()
-    # The packaged library first, then the newest; 17 and 18 are untested, so after 19+.
-    ranked = sorted(candidates, key=lambda c: (c.source != "karellen-llvm-core",
-                                               (c.major or 0) < KNOWN_GOOD_FROM,
-                                               -(c.major or 0)))
     rejected: dict[str, None] = {}
-    for c in ranked:
+    for c in _ranked(env):
         why = _rejection(c)
         if why is None:
             return c

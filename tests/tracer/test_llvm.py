@@ -148,3 +148,36 @@ def test_drjit_imported_first_with_a_bad_library_is_refused_not_aborted(tmp_path
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env)
     assert r.returncode == 3, r.stdout + r.stderr
     assert "imported before tracer" in r.stdout and "LLVM ERROR" not in r.stderr
+
+
+def test_a_probe_started_ahead_is_waited_for_not_run_again(tmp_path, monkeypatch):
+    # start_probe's child is the one configure() waits for: one child a library, and its
+    # answer cached as a probe run by configure() caches it.
+    good = llvm.find_libllvm({})
+    env = {"WHITTED_LLVM_SEARCH": os.path.dirname(good.path)}
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    spawned = []
+    spawn = llvm._spawn
+    monkeypatch.setattr(llvm, "_spawn", lambda p: spawned.append(p) or spawn(p))
+    monkeypatch.setattr(llvm, "_running", {})
+    first = llvm._ranked(env)[0].path   # the folder may hold links to it too
+    assert llvm._start_first_probe(env) == first
+    assert llvm._start_first_probe(env) is None   # already running: not started twice
+    assert llvm.find_libllvm(env).path == first
+    assert spawned == [first] and llvm._running == {}
+    assert llvm._read_probe_cache() == {llvm._probe_key(first): True}
+    # Answered from the cache now: nothing to start ahead.
+    assert llvm._start_first_probe(env) is None and spawned == [first]
+
+
+def test_a_probe_started_ahead_for_a_library_that_fails_rejects_it(tmp_path, monkeypatch):
+    junk = tmp_path / "lib" / "libLLVM-19.so.1"
+    junk.parent.mkdir()
+    junk.write_bytes(b"not a library")
+    env = {"WHITTED_LLVM_SEARCH": str(junk.parent)}
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path / "cache"))
+    monkeypatch.setattr(llvm, "_running", {})
+    assert llvm._start_first_probe(env) == str(junk)
+    with pytest.raises(llvm.LLVMUnavailable, match="does not load"):
+        llvm.find_libllvm(env)
+    assert llvm._running == {}
