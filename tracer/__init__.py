@@ -1,7 +1,9 @@
 """whitted's tracer: a Whitted ray tracer vectorised with Dr.Jit, and its scene model.
 
 Importing this package first finds a libLLVM that Dr.Jit's LLVM backend can
-use (see :mod:`tracer.llvm`); it must therefore be imported before drjit.
+use (see :mod:`tracer.llvm`), or starts the child process that checks one and
+holds the first import of drjit until its answer; it must therefore be
+imported before drjit.
 
 >>> from tracer import load_scene, render                 # doctest: +SKIP
 >>> result = render(load_scene("scenes/sphere_point.toml"))  # doctest: +SKIP
@@ -13,7 +15,7 @@ from whitted.tracer import llvm as _llvm
 
 # Dr.Jit loads libLLVM when it is imported: too late to choose then. A bad
 # library already loaded is refused by tracer.backend.use() with advice.
-_llvm.configure()
+_llvm.configure_before_drjit()
 
 from whitted.tracer.errors import SceneError, UserError  # noqa: E402
 from whitted.tracer.scene import Scene, load_scene  # noqa: E402

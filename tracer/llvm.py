@@ -161,7 +161,7 @@ _PROBE_CODE = ("import drjit as dr, drjit.llvm as m\n"
                "assert y.numpy().tolist() == [3, 4, 5]\n")
 #: How long a probe may take before its library counts as not loading (seconds).
 PROBE_TIMEOUT = 120
-#: Probe children started ahead by :func:`start_probe`, by path: :func:`_probe` waits for
+#: Probe children started ahead by :func:`configure_before_drjit`, by path: :func:`_probe` waits for
 #: one of these rather than starting another.
 _running: dict[str, subprocess.Popen] = {}
 
@@ -181,7 +181,7 @@ def _probe_key(path: str) -> str:
 
 def _probe(path: str) -> bool:
     """Run Dr.Jit on ``path`` in a child process; an LLVM abort only kills the child.
-    A child :func:`start_probe` started for ``path`` is waited for instead."""
+    A child :func:`configure_before_drjit` started for ``path`` is waited for instead."""
     key = _probe_key(path)
     results = _read_probe_cache()
     if key in results:
@@ -202,25 +202,42 @@ def _probe(path: str) -> bool:
     return ok
 
 
-def start_probe() -> None:
-    """Start the child process that :func:`configure` will wait for first, and return.
+def configure_before_drjit() -> None:
+    """:func:`configure`, finished before Dr.Jit or Mitsuba is first imported (what
+    importing :mod:`tracer` does).
 
-    A process whose probe answer is not cached yet (a fresh machine, CI's case) spends
-    about 0.2 s on it: a Python start, Dr.Jit's import and a small kernel. Started
-    before a command reads its scene, the probe runs on another core meanwhile, and
-    :func:`configure` finds it running or done. Nothing is started where ``drjit`` is
-    imported or a library was already chosen, or where :func:`configure` needs no child
-    (its first candidate is refused by name, or its answer is cached). A command that
-    stops before :func:`configure` leaves its child to finish alone; the child only
-    loads the library and exits.
+    Where :func:`configure` needs no child process (its answer is cached, or its first
+    candidate is refused by name), it runs now. Otherwise the probe's child is started
+    and left to run: a fresh machine's probe (a Python start, Dr.Jit's import and a small
+    kernel, about 0.2 s) then overlaps what the program does before it needs Dr.Jit,
+    such as reading a scene and its meshes. :func:`tracer.backend.use` calls
+    :func:`configure`, which waits for that child; any other first import of ``drjit``
+    or ``mitsuba`` is held by a finder on ``sys.meta_path`` until :func:`configure` has
+    set ``DRJIT_LIBLLVM_PATH``. A program that never needs Dr.Jit leaves its child to
+    finish alone; the child only loads the library and exits.
     """
-    if _chosen is not None or _error is not None or "drjit" in sys.modules:
+    if _chosen is None and _error is None and "drjit" not in sys.modules \
+            and _start_first_probe(os.environ) is not None:
+        sys.meta_path.insert(0, _ConfigureFirst())
         return
-    _start_first_probe(os.environ)
+    configure()
+
+
+class _ConfigureFirst:
+    """A ``sys.meta_path`` finder that runs :func:`configure` before the first import of
+    Dr.Jit or Mitsuba, then leaves the import to the other finders."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name.partition(".")[0] in ("drjit", "mitsuba"):
+            if self in sys.meta_path:
+                sys.meta_path.remove(self)
+            configure()
+        return None
 
 
 def _start_first_probe(env) -> str | None:
-    """:func:`start_probe`'s work: the path of the child started, or None."""
+    """Start the probe's child for the first candidate that :func:`find_libllvm` would
+    load, if its answer is not cached; the path of the child started, or None."""
     results = _read_probe_cache()
     for c in _ranked(env):
         if c.path in _running:

@@ -36,10 +36,8 @@ def add_parser(sub) -> None:
 
 
 def run(args) -> int:
-    from whitted.tracer import llvm
     from whitted.tracer.imageio import check_output_path, write_image
 
-    llvm.start_probe()  # a fresh machine's libLLVM probe runs while the scene is read
     out = check_output_path(args.output)
     if args.lpe is not None:
         from whitted.tracer.lpe import compile_lpe

@@ -44,11 +44,11 @@ def probes(monkeypatch):
     """The libLLVM probe's child process replaced: the paths it was run for, and its answer."""
     runs = SimpleNamespace(paths=[], ok=True)
 
-    def run(cmd, env, **kwargs):
-        runs.paths.append(env["DRJIT_LIBLLVM_PATH"])
-        return SimpleNamespace(returncode=0 if runs.ok else 1)
+    def spawn(path):
+        runs.paths.append(path)
+        return SimpleNamespace(wait=lambda timeout: 0 if runs.ok else 1)
 
-    monkeypatch.setattr(llvm.subprocess, "run", run)
+    monkeypatch.setattr(llvm, "_spawn", spawn)
     return runs
 
 

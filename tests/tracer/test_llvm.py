@@ -151,7 +151,7 @@ def test_drjit_imported_first_with_a_bad_library_is_refused_not_aborted(tmp_path
 
 
 def test_a_probe_started_ahead_is_waited_for_not_run_again(tmp_path, monkeypatch):
-    # start_probe's child is the one configure() waits for: one child a library, and its
+    # A child started ahead is the one configure() waits for: one child a library, and its
     # answer cached as a probe run by configure() caches it.
     good = llvm.find_libllvm({})
     env = {"WHITTED_LLVM_SEARCH": os.path.dirname(good.path)}
@@ -181,3 +181,37 @@ def test_a_probe_started_ahead_for_a_library_that_fails_rejects_it(tmp_path, mon
     with pytest.raises(llvm.LLVMUnavailable, match="does not load"):
         llvm.find_libllvm(env)
     assert llvm._running == {}
+
+
+_IMPORT_THEN_DRJIT = """
+import os, sys
+import whitted.tracer
+from whitted.tracer import llvm
+hooked = [f for f in sys.meta_path if isinstance(f, llvm._ConfigureFirst)]
+print("at import:", len(hooked), len(llvm._running), "DRJIT_LIBLLVM_PATH" in os.environ)
+import drjit as dr, drjit.llvm as m
+print("after drjit:", len([f for f in sys.meta_path if isinstance(f, llvm._ConfigureFirst)]),
+      len(llvm._running))
+x = m.Float([1, 2]) + 1
+dr.eval(x)
+print("loaded the chosen:", os.path.realpath(llvm.loaded_libllvm())
+      == os.path.realpath(os.environ["DRJIT_LIBLLVM_PATH"]))
+"""
+
+
+def test_importing_tracer_starts_the_probe_and_drjit_waits_for_its_answer(tmp_path):
+    # A fresh cache: importing tracer starts the probe's child and returns; the first
+    # import of drjit finishes the choice (DRJIT_LIBLLVM_PATH set) before Dr.Jit loads.
+    # With the answer cached, the choice is made at import, as before.
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "DRJIT_LIBLLVM_PATH"}
+    env["XDG_CACHE_HOME"] = str(tmp_path)
+    runs = [subprocess.run([sys.executable, "-c", _IMPORT_THEN_DRJIT], env=env,
+                           capture_output=True, text=True) for _ in range(2)]
+    for r in runs:
+        assert r.returncode == 0, r.stderr
+    cold, warm = (r.stdout.splitlines() for r in runs)
+    assert cold == ["at import: 1 1 False", "after drjit: 0 0", "loaded the chosen: True"]
+    assert warm == ["at import: 0 0 True", "after drjit: 0 0", "loaded the chosen: True"]
