@@ -1316,6 +1316,10 @@ def _tree_holds(b: BVHArrays, n: int, max_leaf: int) -> bool:
     return levels == b.depth
 
 
+#: Triangles a block of :func:`_boxes_hold`'s comparison of leaf boxes with corners.
+CHECK_BLOCK = 1 << 14
+
+
 def _boxes_hold(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
                 max_leaf: int) -> bool:
     """Whether children lie inside their parents' boxes and triangles inside their leaves'.
@@ -1344,11 +1348,15 @@ def _boxes_hold(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
             return False
         owner = np.empty(n, np.int64)   # the leaf of each triangle, in the caller's order
         owner[o] = np.repeat(np.flatnonzero(leaf)[by_start], cnt[by_start])
-        for box, pick, wrong in ((b.lo, np.minimum, np.greater), (b.hi, np.maximum, np.less)):
-            corner = pick(p0, p1)
-            pick(corner, p2, out=corner)
-            if wrong(np.take(box, owner, axis=0), corner).any():
-                return False
+        # Block by block: small temporaries, reused (see mesh.FACE_NORMALS_BLOCK).
+        for s in range(0, n, CHECK_BLOCK):
+            t = slice(s, s + CHECK_BLOCK)
+            for box, pick, wrong in ((b.lo, np.minimum, np.greater),
+                                     (b.hi, np.maximum, np.less)):
+                corner = pick(p0[t], p1[t])
+                pick(corner, p2[t], out=corner)
+                if wrong(np.take(box, owner[t], axis=0), corner).any():
+                    return False
     except (IndexError, ValueError):
         return False
     return True

@@ -247,11 +247,15 @@ def _mutations(b: bvh.BVHArrays, n: int):
     yield "arrays of another length", changed(order=lambda a: None, count=b.count[:-1].copy())
 
 
-@pytest.mark.parametrize("parallel", [False, True], ids=["one thread", "boxes beside"])
-def test_every_broken_invariant_fails_the_check(tmp_path, monkeypatch, parallel):
+@pytest.mark.parametrize("parallel,block", [(False, None), (True, None), (True, 7)],
+                         ids=["one thread", "boxes beside", "boxes beside, blocks of 7"])
+def test_every_broken_invariant_fails_the_check(tmp_path, monkeypatch, parallel, block):
     """Each broken invariant fails the check, whether the boxes are checked after the
-    structure or beside it, on a second thread (bvh.PARALLEL_CHECK_FROM)."""
+    structure or beside it, on a second thread (bvh.PARALLEL_CHECK_FROM), and whether
+    the leaves' boxes meet the corners in one block or in many (bvh.CHECK_BLOCK)."""
     monkeypatch.setattr(bvh, "PARALLEL_CHECK_FROM", 1 if parallel else 1 << 62)
+    if block is not None:
+        monkeypatch.setattr(bvh, "CHECK_BLOCK", block)
     p = _knot_corners(tmp_path)
     b = bvh.build_bvh(*p)
     assert bvh.valid_arrays(b, *p)

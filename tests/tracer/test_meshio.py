@@ -613,6 +613,25 @@ def per_corner(normals, faces):
     return normals[faces].reshape(-1, 3)
 
 
+def test_face_normals_in_blocks_are_the_whole_meshs_bit_for_bit(monkeypatch):
+    # A mesh's face normals (shapes.mesh._face_normals) are computed in blocks; with
+    # blocks of 7 triangles, degenerate ones among them, they are the formula's over
+    # the whole arrays at once, bit for bit.
+    from whitted.tracer.shapes import mesh
+
+    rng = np.random.default_rng(5)
+    p0, p1, p2 = (rng.normal(size=(200, 3)) for _ in range(3))
+    p1[[3, 50, 199]] = p0[[3, 50, 199]]                 # degenerate: two corners equal
+    p2[77] = p0[77] + 2.0 * (p1[77] - p0[77])           # degenerate: on a line
+    whole = np.cross(p1 - p0, p2 - p0)
+    whole /= np.maximum(np.linalg.norm(whole, axis=1, keepdims=True), 1e-30)
+    monkeypatch.setattr(mesh, "FACE_NORMALS_BLOCK", 7)
+    got = mesh._face_normals(p0, p1, p2)
+    assert got.dtype == np.float64
+    np.testing.assert_array_equal(got.view(np.uint64), whole.view(np.uint64))
+    assert not got[[3, 50, 199]].any()
+
+
 def test_vertex_normals_equal_mitsubas_for_an_obj_mesh(tmp_path, mi):
     v, quads = bumpy_grid(7, 1)
     text = "".join(f"v {x!r} {y!r} {z!r}\n" for x, y, z in v.tolist())
