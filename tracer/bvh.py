@@ -1170,7 +1170,8 @@ RECENT_COUNT = 4
 RECENT_MAX_TRIANGLES = 1 << 18
 
 
-def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
+def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, key: str | None = None
+               ) -> BVH:
     """``BVH(p0, p1, p2)``, or the one built for the same triangles a little earlier.
 
     A process that builds one scene many times, as the formula-bug sweep does (a build
@@ -1180,12 +1181,18 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> BVH:
     the corners and the backend. Its ``build_seconds`` stay those of its build.
     Trees of :data:`DISK_MIN_TRIANGLES` triangles or more are also kept on disk
     (:func:`_kept_on_disk`), for the next process.
+
+    ``key`` stands for the corners' hash where the caller has one of what determines
+    them (:func:`tracer.cache.content_key` of a mesh's vertices and faces, hashed while
+    the corners are gathered: :class:`tracer.shapes.mesh.Block`); different corners
+    must never share a key.
     """
     from whitted.tracer.cache import content_key
 
     p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
                   for p in (p0, p1, p2))
-    corners = content_key(p0, p1, p2)   # one hash of the corners serves both caches
+    # one hash of the corners serves both caches
+    corners = content_key(p0, p1, p2) if key is None else key
     if len(p0) > RECENT_MAX_TRIANGLES:
         return _kept_on_disk(p0, p1, p2, corners)
     key = (backend.name(), corners)

@@ -541,6 +541,40 @@ def test_a_few_boxes_make_their_tree_on_the_host_rounded_as_the_device_rounds(ji
     assert max(costs) < 1.1
 
 
+@pytest.mark.parametrize("beside", [False, True], ids=["one thread", "key beside"])
+def test_meshes_sharing_vertices_but_not_faces_get_trees_of_their_own(jit, monkeypatch,
+                                                                      beside):
+    """A mesh's tree is keyed by a hash of its vertices and faces (shapes.mesh._tree_key;
+    from PARALLEL_NORMALS_FROM triangles on, hashed beside the corners' gathering): a
+    mesh with the same vertices and other faces, or the same faces and a vertex moved,
+    gets its own tree, over its own corners; the same mesh again gets the first one's."""
+    from whitted.tracer.shapes import mesh
+
+    monkeypatch.setattr(mesh, "PARALLEL_NORMALS_FROM", 1 if beside else 1 << 62)
+    rng = np.random.default_rng(21)
+    v = rng.normal(size=(120, 3))
+    f = rng.integers(0, len(v), size=(300, 3))
+    f2 = f.copy()
+    f2[5] = f2[5][::-1]                         # one face wound the other way
+    v2 = v.copy()
+    v2[f[9, 0], 2] += 1e-9                      # one vertex moved a little
+
+    def block(v, f):
+        return mesh.Block(mesh.Mesh("m.obj", False, v, f, None, None,
+                                    tuple(map(tuple, np.eye(4))), None))
+
+    first = block(v, f)
+    assert block(v.copy(), f.copy()).bvh is first.bvh
+    for vv, ff in ((v, f2), (v2, f)):
+        other = block(vv, ff)
+        assert other.bvh is not first.bvh
+        corners = [vv[ff[:, k]] for k in range(3)]
+        order = other.bvh.perm.numpy()
+        for got, want in zip(other.bvh.triangles(), corners, strict=True):
+            np.testing.assert_array_equal(np.stack([c.numpy() for c in got], axis=1),
+                                          want[order].astype(np.float32))
+
+
 @pytest.mark.parametrize("name", ["instances_scaled", "knots"])
 def test_instances_hit_the_same_whichever_builder_made_their_hierarchy(jit, tmp_path,
                                                                        monkeypatch, name):

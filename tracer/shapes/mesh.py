@@ -88,9 +88,10 @@ def pack(members: list, packing) -> list:
     return out
 
 
-#: Meshes of this many triangles or more compute their face normals beside their BVH, on
-#: a thread of their own (:class:`Block`). The 1,000,000-triangle knot of
-#: ``bench_speed.py process``: normals about 60 ms, hidden behind the tree's 0.3 s.
+#: Meshes of this many triangles or more hash their tree's key and compute their face
+#: normals beside the rest, on a thread of their own (:class:`Block`). The
+#: 1,000,000-triangle knot of ``bench_speed.py process``: normals about 40-70 ms and the key
+#: 20-40 ms, hidden behind the corners' gathering and the tree's checks.
 PARALLEL_NORMALS_FROM = 1 << 15
 
 
@@ -115,17 +116,33 @@ def _face_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     return n
 
 
-def _tree_beside_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> tuple:
-    """(:func:`tracer.bvh.shared_bvh`, :func:`_face_normals`), the normals computed on a
-    second core while the tree is hashed, read, checked and packed: numpy's loops let go
-    of Python's lock, and so does hashing."""
+def _corners(v: np.ndarray, f: np.ndarray) -> list:
+    """The triangles' corners (p0, p1, p2), each (F, 3) float64."""
+    return [np.take(v, f[:, k], axis=0) for k in range(3)]
+
+
+def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
+    """The key of the mesh's tree (:func:`tracer.bvh.shared_bvh`): a hash of its vertices
+    and faces, which give its corners, and half their bytes."""
+    from whitted.tracer.cache import content_key
+
+    return content_key(v, f)
+
+
+def _tree_beside_normals(v: np.ndarray, f: np.ndarray) -> tuple:
+    """(:func:`tracer.bvh.shared_bvh`, :func:`_face_normals`) of the mesh's triangles, with
+    work on a second core: the tree's key hashed while the corners are gathered, then
+    the normals computed while the tree is read, checked and packed (hashing and
+    numpy's loops let go of Python's lock)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from whitted.tracer.bvh import shared_bvh
 
     with ThreadPoolExecutor(max_workers=1) as pool:
+        key = pool.submit(_tree_key, v, f)
+        p0, p1, p2 = _corners(v, f)
         normals = pool.submit(_face_normals, p0, p1, p2)
-        return shared_bvh(p0, p1, p2), normals.result()
+        return shared_bvh(p0, p1, p2, key=key.result()), normals.result()
 
 
 class Block(base.Block):
@@ -136,11 +153,12 @@ class Block(base.Block):
 
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
-        p0, p1, p2 = (np.take(v, f[:, k], axis=0) for k in range(3))
         if self.count < PARALLEL_NORMALS_FROM:
-            self.bvh, n = shared_bvh(p0, p1, p2), _face_normals(p0, p1, p2)
+            p0, p1, p2 = _corners(v, f)
+            self.bvh = shared_bvh(p0, p1, p2, key=_tree_key(v, f))
+            n = _face_normals(p0, p1, p2)
         else:
-            self.bvh, n = _tree_beside_normals(p0, p1, p2)
+            self.bvh, n = _tree_beside_normals(v, f)
         self.face_n = base.v3(n)
         self.faces = base.uints(f.reshape(-1))
         self.p = base.v3(v)
