@@ -204,12 +204,13 @@ def load_mesh(path: str | Path, *, flip_tex_coords: bool | None = None) -> MeshD
     if mesh is not None:
         _cache.move_to_end(key)
         return mesh
-    disk = _disk_entry(path, key) if key[3] >= DISK_MIN_BYTES else None
+    disk, data = _disk_entry(path, key) if key[3] >= DISK_MIN_BYTES else (None, None)
     mesh = _disk_read(disk) if disk is not None else None
-    if mesh is None:
-        mesh = _read_mesh(path, key[3], flip_tex_coords)
+    if mesh is None:   # parsed from the bytes just hashed, where they were read
+        mesh = _read_mesh(path, key[3], flip_tex_coords, data)
         if disk is not None and _identity(path) == key[:-1]:
             _disk_write(disk, mesh)
+    del data
     for a in (mesh.vertices, mesh.faces, mesh.normals, mesh.uvs):
         if a is not None:
             a.flags.writeable = False
@@ -235,20 +236,20 @@ def disk_folder() -> Path:
     return cache.home() / "meshes"
 
 
-def _disk_entry(path: Path, key: tuple) -> Path | None:
-    """Where the parse of this file's bytes (with this flip option) is kept, or None when
-    the file cannot be read whole or changed while it was hashed."""
+def _disk_entry(path: Path, key: tuple) -> tuple[Path | None, bytes | None]:
+    """(where the parse of this file's bytes, with this flip option, is kept; those bytes),
+    or (None, None) when the file cannot be read whole or changed while it was hashed."""
     from whitted.tracer.cache import content_key, source_digest
 
     try:
         with open(path, "rb") as fh:
             data = fh.read(key[3] + 1)
     except OSError:
-        return None   # the reader names the problem
+        return None, None   # the reader names the problem
     if len(data) != key[3] or _identity(path) != key[:-1]:
-        return None
+        return None, None
     flip = {None: "default", True: "flip", False: "keep"}[key[-1]]
-    return disk_folder() / f"{content_key(source_digest(__file__), flip, data)}.arrays"
+    return disk_folder() / f"{content_key(source_digest(__file__), flip, data)}.arrays", data
 
 
 _DISK_KINDS = {"vertices": "<f8", "faces": "<i8"}
@@ -355,8 +356,12 @@ def _stat_regular(path: Path) -> os.stat_result:
     return st
 
 
-def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None) -> MeshData:
-    """Parse the file (no cache): the format by its first bytes, then by its suffix."""
+def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None,
+               data: bytes | None = None) -> MeshData:
+    """Parse the file (no cache): the format by its first bytes, then by its suffix.
+    ``data``: the file's bytes, already read (to hash them for the cache on disk)."""
+    import io
+
     from whitted.tracer.limits import check_memory
 
     def check(kind: str) -> None:
@@ -367,15 +372,15 @@ def _read_mesh(path: Path, size: int, flip_tex_coords: bool | None) -> MeshData:
             raise MeshError(path, str(e)) from None
 
     try:
-        with open(path, "rb") as fh:
+        with open(path, "rb") if data is None else io.BytesIO(data) as fh:
             magic = fh.read(4)
             if magic[:3] == b"ply" and magic[3:4] in (b"\n", b"\r", b" ", b"\t"):
                 check("binary")  # ascii PLY files are checked again once their header is read
                 mesh = _read_ply(path, fh, size, bool(flip_tex_coords), check)
             elif path.suffix.lower() == ".obj":
                 check("text")
-                data = magic + fh.read()
-                mesh = _read_obj(path, data, True if flip_tex_coords is None
+                text = data if data is not None else magic + fh.read()
+                mesh = _read_obj(path, text, True if flip_tex_coords is None
                                  else flip_tex_coords)
             elif path.suffix.lower() == ".ply":
                 raise MeshError(path, "not a PLY file (it does not start with 'ply')")

@@ -86,6 +86,37 @@ def test_a_mesh_read_again_comes_from_its_entry_and_equals_the_parse(home, tmp_p
     assert len(_entries(home / "meshes")) == 2
 
 
+@pytest.mark.parametrize("kind", ["obj", "ply"])
+def test_a_mesh_kept_on_disk_is_read_once_hashed_and_parsed_from_the_same_bytes(
+        home, tmp_path, monkeypatch, kind):
+    # A file that misses the cache is read once: the bytes hashed for its entry are the
+    # bytes parsed. Its parse equals the reader's own, without the cache.
+    import builtins
+
+    path = _sphere_obj(tmp_path / "s.obj")
+    if kind == "ply":
+        m = load_mesh(path, flip_tex_coords=False)
+        meshio.write_ply(tmp_path / "s.ply", m.vertices, m.faces)
+        path = tmp_path / "s.ply"
+    meshio.clear_cache()
+    opened, real_open = [], builtins.open
+
+    def counting_open(file, *a, **k):
+        if os.fspath(file) == os.fspath(path):
+            opened.append(file)
+        return real_open(file, *a, **k)
+
+    with monkeypatch.context() as m:
+        m.setattr(builtins, "open", counting_open)
+        cached = load_mesh(path)
+    assert len(opened) == 1
+    assert len(_entries(home / "meshes")) == (2 if kind == "ply" else 1)
+    plain = meshio._read_mesh(path, os.stat(path).st_size, None)
+    for a, b in ((plain.vertices, cached.vertices), (plain.faces, cached.faces),
+                 (plain.normals, cached.normals), (plain.uvs, cached.uvs)):
+        np.testing.assert_array_equal(a, b)
+
+
 def test_a_copy_of_the_file_elsewhere_uses_the_same_entry(home, tmp_path, monkeypatch):
     path = _sphere_obj(tmp_path / "s.obj")
     load_mesh(path)
