@@ -602,35 +602,46 @@ mi.util.write_bitmap(sys.argv[2], mi.render(scene))
 """
 
 #: Mitsuba's side of :data:`MITSUBA_PROCESS`, split the same way: import (with the
-#: variant set), scene load (its meshes read and Embree's build), render, EXR.
+#: variant set), scene load (its meshes read and Embree's build), render, EXR; after the
+#: load and the render, the seconds LLVM spent compiling their kernels (Dr.Jit's kernel
+#: history: the kernels not found in its cache).
 MITSUBA_SPLIT = """
 import sys, time
 t0 = time.perf_counter()
 import drjit as dr
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
+dr.set_flag(dr.JitFlag.KernelHistory, True)
+def llvm():
+    return sum(k["backend_time"] for k in dr.kernel_history()
+               if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
+llvm()
 t1 = time.perf_counter()
 scene = mi.load_file(sys.argv[1])
 t2 = time.perf_counter()
+c1 = llvm()
 image = mi.render(scene)
 dr.eval(image)
 dr.sync_thread()
 t3 = time.perf_counter()
+c2 = llvm()
 mi.util.write_bitmap(sys.argv[2], image)
 t4 = time.perf_counter()
-print(t1 - t0, t2 - t1, t3 - t2, t4 - t3)
+print(t1 - t0, t2 - t1, c1, t3 - t2, c2, t4 - t3)
 """
 
-#: The tracer's first render in a fresh process, split: import, mesh read, rest of the
-#: scene load, Integrator (BVH builds), render, EXR. Freed memory kept as `whitted`
-#: keeps it (reference.malloc, the command's first step).
+#: The tracer's first render in a fresh process, split in the order `whitted render`
+#: runs it: import, mesh read, rest of the scene load, Dr.Jit's start (the libLLVM
+#: choice, waiting for its probe where that is not cached, and Dr.Jit's import),
+#: Integrator (BVH builds), render, EXR; after the Integrator and the render, the
+#: seconds LLVM spent compiling their kernels (as in :data:`MITSUBA_SPLIT`). Freed
+#: memory kept as `whitted` keeps it (reference.malloc, the command's first step).
 SPLIT = """
 import sys, time
 t0 = time.perf_counter()
 from whitted.reference.malloc import keep_freed_memory
 keep_freed_memory()
 from whitted.tracer import load_scene, meshio
-from whitted.tracer.integrator import Integrator
 from whitted.tracer.imageio import write_image
 t1 = time.perf_counter()
 read = [0.0]
@@ -644,14 +655,40 @@ def timed_load(*a, **k):
 meshio.load_mesh = timed_load
 scene = load_scene(sys.argv[1])  # its film: the size and spp of the command lines
 t2 = time.perf_counter()
-integ = Integrator(scene)
+from whitted.tracer import backend
+backend.use()
+import drjit as dr
+from whitted.tracer.integrator import Integrator
+dr.set_flag(dr.JitFlag.KernelHistory, True)
+def llvm():
+    return sum(k["backend_time"] for k in dr.kernel_history()
+               if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
+llvm()
 t3 = time.perf_counter()
-result = integ.render()
+integ = Integrator(scene)
 t4 = time.perf_counter()
-write_image(sys.argv[2], result.image)
+c1 = llvm()
+result = integ.render()
 t5 = time.perf_counter()
-print(t1 - t0, read[0], t2 - t1 - read[0], t3 - t2, t4 - t3, t5 - t4)
+c2 = llvm()
+write_image(sys.argv[2], result.image)
+t6 = time.perf_counter()
+print(t1 - t0, read[0], t2 - t1 - read[0], t3 - t2, t4 - t3, c1, t5 - t4, c2, t6 - t5)
 """
+
+#: A split's column that is the LLVM seconds of the step before it (printed beside it).
+LLVM_COLUMN = "LLVM"
+
+
+def _split_line(names, values) -> str:
+    """``import 0.180 s, ..., render 0.900 s (LLVM 0.380 s), ...``."""
+    parts = []
+    for name, x in zip(names, values, strict=True):
+        if name == LLVM_COLUMN:
+            parts[-1] += f" ({LLVM_COLUMN} {x:.3f} s)"
+        else:
+            parts.append(f"{name} {x:.3f} s")
+    return ", ".join(parts)
 
 
 def write_process_scenes(folder: Path, triangles: int, ply_triangles: int, size: tuple,
@@ -764,22 +801,25 @@ def cmd_process(args) -> int:
                     print(f"    {label}: {name:<34} {t:6.2f} s [{min(times[name]):.2f}-"
                           f"{max(times[name]):.2f}]{ratio}", flush=True)
             splits = [(f"tracer ({lab})", [sys.executable, split, scene, tmp / "s.exr"],
-                       extra, ("import", "mesh read", "rest of scene load",
-                               "Integrator (BVH)", "render", "EXR"))
+                       extra, ("import", "mesh read", "rest of scene load", "Dr.Jit start",
+                               "Integrator (BVH)", LLVM_COLUMN, "render", LLVM_COLUMN, "EXR"))
                       for lab, _, extra in tracers]
             splits.append(("Mitsuba", [sys.executable, mitsuba_split, xml, tmp / "ms.exr"],
-                           {}, ("import", "scene load (meshes, Embree)", "render", "EXR")))
-            rows = {name: [] for name, *_ in splits}
-            for _ in range(args.repeat):
-                for name, cmd, extra, names in splits:
-                    out = subprocess.run([str(c) for c in cmd], capture_output=True,
-                                         text=True, check=True, env=_with_env(None, extra))
-                    rows[name].append([float(x) for x in out.stdout.split()[-len(names):]])
-            for name, _, _, names in splits:
-                med = [statistics.median(col) for col in zip(*rows[name], strict=True)]
-                print(f"    {name} in-process, first of a process (warm caches), medians: "
-                      + ", ".join(f"{k} {x:.3f} s" for k, x in zip(names, med, strict=True)),
-                      flush=True)
+                           {}, ("import", "scene load (meshes, Embree)", LLVM_COLUMN,
+                                "render", LLVM_COLUMN, "EXR")))
+            for label, fresh in (("cold", True), ("warm", False)):
+                rows = {name: [] for name, *_ in splits}
+                for _ in range(args.repeat):
+                    for name, cmd, extra, names in splits:
+                        env = _with_env(_fresh_env(tmp) if fresh else None, extra)
+                        out = subprocess.run([str(c) for c in cmd], capture_output=True,
+                                             text=True, check=True, env=env)
+                        rows[name].append([float(x) for x in
+                                           out.stdout.split()[-len(names):]])
+                for name, _, _, names in splits:
+                    med = [statistics.median(col) for col in zip(*rows[name], strict=True)]
+                    print(f"    {name} in-process, first of a process ({label} caches), "
+                          f"medians: {_split_line(names, med)}", flush=True)
     print("  the cold runs have empty HOME, XDG_CACHE_HOME and DRJIT_CACHE_DIR (Dr.Jit's "
           "kernel cache); Python's own bytecode caches stay warm")
     return 0
