@@ -161,9 +161,11 @@ _PROBE_CODE = ("import drjit as dr, drjit.llvm as m\n"
                "assert y.numpy().tolist() == [3, 4, 5]\n")
 #: How long a probe may take before its library counts as not loading (seconds).
 PROBE_TIMEOUT = 120
-#: Probe children started ahead by :func:`configure_before_drjit`, by path: :func:`_probe` waits for
-#: one of these rather than starting another.
-_running: dict[str, subprocess.Popen] = {}
+#: Probe children started ahead by :func:`configure_before_drjit`, by path, with the id of
+#: the process that started each: :func:`_probe` waits for one of these rather than
+#: starting another (a forked process, which cannot wait for its parent's child, starts
+#: its own).
+_running: dict[str, tuple[int, subprocess.Popen]] = {}
 
 
 def _spawn(path: str) -> subprocess.Popen:
@@ -186,9 +188,9 @@ def _probe(path: str) -> bool:
     results = _read_probe_cache()
     if key in results:
         return results[key]
-    child = _running.pop(path, None)
+    starter, child = _running.pop(path, (None, None))
     try:
-        child = child or _spawn(path)
+        child = child if starter == os.getpid() else _spawn(path)
         ok = child.wait(timeout=PROBE_TIMEOUT) == 0
     except subprocess.TimeoutExpired:
         child.kill()
@@ -248,7 +250,7 @@ def _start_first_probe(env) -> str | None:
         if answer is True:
             return None   # configure() chooses it without a child
         if answer is None:
-            _running[c.path] = _spawn(c.path)
+            _running[c.path] = (os.getpid(), _spawn(c.path))
             return c.path
     return None
 

@@ -215,3 +215,22 @@ def test_importing_tracer_starts_the_probe_and_drjit_waits_for_its_answer(tmp_pa
     cold, warm = (r.stdout.splitlines() for r in runs)
     assert cold == ["at import: 1 1 False", "after drjit: 0 0", "loaded the chosen: True"]
     assert warm == ["at import: 0 0 True", "after drjit: 0 0", "loaded the chosen: True"]
+
+
+def test_a_forked_process_probes_for_itself(tmp_path, monkeypatch):
+    # A process forked after the import cannot wait for its parent's child (waitpid
+    # answers ECHILD, which subprocess reads as success): it starts its own probe.
+    good = llvm.find_libllvm({})
+    env = {"WHITTED_LLVM_SEARCH": os.path.dirname(good.path)}
+    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
+    spawned = []
+    spawn = llvm._spawn
+    monkeypatch.setattr(llvm, "_spawn", lambda p: spawned.append(p) or spawn(p))
+    monkeypatch.setattr(llvm, "_running", {})
+    first = llvm._start_first_probe(env)
+    parents_child = llvm._running[first][1]
+    pid = os.getpid()
+    monkeypatch.setattr(llvm.os, "getpid", lambda: pid + 1)   # as in a forked process
+    assert llvm.find_libllvm(env).path == first
+    assert spawned == [first, first]
+    assert parents_child.wait(timeout=llvm.PROBE_TIMEOUT) == 0
