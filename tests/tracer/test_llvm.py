@@ -150,16 +150,24 @@ def test_drjit_imported_first_with_a_bad_library_is_refused_not_aborted(tmp_path
     assert "imported before tracer" in r.stdout and "LLVM ERROR" not in r.stderr
 
 
-def test_a_probe_started_ahead_is_waited_for_not_run_again(tmp_path, monkeypatch):
-    # A child started ahead is the one configure() waits for: one child a library, and its
-    # answer cached as a probe run by configure() caches it.
+@pytest.fixture
+def spawned(tmp_path, monkeypatch):
+    """A search of the packaged libLLVM's folder, an empty probe cache, no child started
+    ahead, and the paths of the probe children started (real ones): (env, paths)."""
     good = llvm.find_libllvm({})
     env = {"WHITTED_LLVM_SEARCH": os.path.dirname(good.path)}
     monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    spawned = []
+    paths = []
     spawn = llvm._spawn
-    monkeypatch.setattr(llvm, "_spawn", lambda p: spawned.append(p) or spawn(p))
+    monkeypatch.setattr(llvm, "_spawn", lambda p: paths.append(p) or spawn(p))
     monkeypatch.setattr(llvm, "_running", {})
+    return env, paths
+
+
+def test_a_probe_started_ahead_is_waited_for_not_run_again(spawned):
+    # A child started ahead is the one configure() waits for: one child a library, and its
+    # answer cached as a probe run by configure() caches it.
+    env, spawned = spawned
     first = llvm._ranked(env)[0].path   # the folder may hold links to it too
     assert llvm._start_first_probe(env) == first
     assert llvm._start_first_probe(env) is None   # already running: not started twice
@@ -217,16 +225,10 @@ def test_importing_tracer_starts_the_probe_and_drjit_waits_for_its_answer(tmp_pa
     assert warm == ["at import: 0 0 True", "after drjit: 0 0", "loaded the chosen: True"]
 
 
-def test_a_forked_process_probes_for_itself(tmp_path, monkeypatch):
+def test_a_forked_process_probes_for_itself(spawned, monkeypatch):
     # A process forked after the import cannot wait for its parent's child (waitpid
     # answers ECHILD, which subprocess reads as success): it starts its own probe.
-    good = llvm.find_libllvm({})
-    env = {"WHITTED_LLVM_SEARCH": os.path.dirname(good.path)}
-    monkeypatch.setenv("XDG_CACHE_HOME", str(tmp_path))
-    spawned = []
-    spawn = llvm._spawn
-    monkeypatch.setattr(llvm, "_spawn", lambda p: spawned.append(p) or spawn(p))
-    monkeypatch.setattr(llvm, "_running", {})
+    env, spawned = spawned
     first = llvm._start_first_probe(env)
     parents_child = llvm._running[first][1]
     pid = os.getpid()
