@@ -1177,29 +1177,29 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, key: str | None =
     A process that builds one scene many times, as the formula-bug sweep does (a build
     for each of the 17 bugs that reach the mesh_knot scene), builds each tree once.
     A BVH is never changed after its build, so the tree is shared as it is. Kept: the
-    last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by a SHA-256 of
-    the corners and the backend. Its ``build_seconds`` stay those of its build.
+    last RECENT_COUNT trees of at most RECENT_MAX_TRIANGLES triangles, by the corners'
+    key (below) and the backend. Its ``build_seconds`` stay those of its build.
     Trees of :data:`DISK_MIN_TRIANGLES` triangles or more are also kept on disk
     (:func:`_kept_on_disk`), for the next process.
 
-    ``key`` stands for the corners' hash where the caller has one of what determines
-    them (:func:`tracer.cache.content_key` of a mesh's vertices and faces, hashed while
-    the corners are gathered: :class:`tracer.shapes.mesh.Block`); different corners
-    must never share a key.
+    The corners' key is a SHA-256 of them, or ``key``, where the caller has a hash of
+    what determines them (:func:`tracer.cache.content_key` of a mesh's vertices and
+    faces, hashed while the corners are gathered: :class:`tracer.shapes.mesh.Block`);
+    different corners must never share a key.
     """
     from whitted.tracer.cache import content_key
 
     p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
                   for p in (p0, p1, p2))
-    # one hash of the corners serves both caches
+    # one key of the corners serves both caches
     corners = content_key(p0, p1, p2) if key is None else key
     if len(p0) > RECENT_MAX_TRIANGLES:
         return _kept_on_disk(p0, p1, p2, corners)
-    key = (backend.name(), corners)
-    if key in _RECENT:
-        _RECENT.move_to_end(key)
-        return _RECENT[key]
-    bvh = _RECENT[key] = _kept_on_disk(p0, p1, p2, corners)
+    recent = (backend.name(), corners)
+    if recent in _RECENT:
+        _RECENT.move_to_end(recent)
+        return _RECENT[recent]
+    bvh = _RECENT[recent] = _kept_on_disk(p0, p1, p2, corners)
     while len(_RECENT) > RECENT_COUNT:
         _RECENT.popitem(last=False)
     return bvh
@@ -1225,7 +1225,7 @@ def disk_folder():
 
 def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, corners: str) -> BVH:
     """``BVH(p0, p1, p2)``, its tree read from the disk cache when one was kept for the
-    same corners (``corners``: their :func:`tracer.cache.content_key`) by the same builder
+    same corners (``corners``: their key, :func:`shared_bvh`'s) by the same builder
     (this module's source) and it passes :func:`valid_arrays`; else built, and kept."""
     from whitted.tracer import cache
 
