@@ -50,6 +50,13 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from whitted import tracer  # noqa: E402,F401  (chooses libLLVM before drjit loads)
+from whitted.tracer import llvm  # noqa: E402
+
+# The libLLVM the tracer uses, chosen now (the import may only have started its probe)
+# and exported as DRJIT_LIBLLVM_PATH, so that every child process, Mitsuba's included,
+# loads the same one: left to itself, Dr.Jit loads the system's libLLVM, which on
+# Debian 12 (LLVM 15) aborts Mitsuba's kernels (tracer/llvm.py).
+LIBLLVM = llvm.require()
 
 #: minray's C source (Heckbert 1987, with the fixes it needs to build), kept beside the
 #: checkout in ../shared/minray/ and built at benchmark time; MINRAY_SOURCE for another.
@@ -123,7 +130,8 @@ def self_peak() -> int:
 def machine_note() -> str:
     load = ", ".join(f"{x:.1f}" for x in os.getloadavg())
     return (f"{os.cpu_count()} CPU cores, load average {load} at the start "
-            "(a shared machine: other jobs ran at the same time)")
+            "(a shared machine: other jobs ran at the same time); libLLVM "
+            f"{LIBLLVM.major} ({LIBLLVM.source}) in every process")
 
 
 def commit() -> str:
