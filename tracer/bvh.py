@@ -983,7 +983,6 @@ class BVH:
             res.append((t, dr.select(found, orig, INVALID), beta, gamma))
         return res
 
-    @backend.syntax
     def _loop(self, os, ds, ts, acts, shadow):
         """The traversal of K rays a lane, "while-while" in the words of Aila and Laine
         (2009).
@@ -995,6 +994,11 @@ class BVH:
         the triangle tests in separate loops lets the lanes of a packet do the same
         kind of work at the same time. With K = 1 a lane is one ray; with K > 1,
         ``acts`` says which rays still take part (a shadow ray leaves when blocked).
+
+        The loops are written as ``drjit.while_loop`` calls (the symbolic loops that
+        ``drjit.syntax`` makes of ``while`` statements, with the same state): the
+        decorator parses and recompiles a function's source in every process, about
+        10 ms for this one (see :func:`tracer.backend.syntax`).
         """
         K = len(os)
         n = dr.width(ts[0])
@@ -1016,16 +1020,25 @@ class BVH:
         stack = dr.alloc_local(jit.UInt32, self._stack, jit.UInt32(0))
         nodes, tri_data = self.nodes, self.tris
 
-        while alive:
+        def walk(acts, alive, betas, gammas, node, sp, stack, tris, ts):
             # Inner nodes, until this lane stands at a leaf or has nothing left to visit.
-            while alive & ((node & LEAF_FLAG) == 0):
+            def at_inner(acts, alive, node, sp, stack, ts):
+                return alive & ((node & LEAF_FLAG) == 0)
+
+            def step(acts, alive, node, sp, stack, ts):
                 node, sp, alive = inner_step(nodes, node, sp, stack, alive, os, invs, ts,
                                              shadow, acts)
+                return acts, alive, node, sp, stack, ts
+
+            acts, alive, node, sp, stack, ts = dr.while_loop(
+                (acts, alive, node, sp, stack, ts), at_inner, step,
+                labels=("acts", "alive", "node", "sp", "stack", "ts"))
 
             # The leaf's triangles, one after the other.
-            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
-            end = i + (node & ((1 << COUNT_BITS) - 1))
-            while alive & (i < end):
+            def in_leaf(acts, alive, betas, end, gammas, i, tris, ts):
+                return alive & (i < end)
+
+            def test(acts, alive, betas, end, gammas, i, tris, ts):
                 # Floats 0-7 of the record in one packet gather, float 8 alone: gathering
                 # all 16 (two packets) for the nine used took the camera rays of the
                 # knot from 72.5 to 69-71 ms (a throwaway script, medians of 7).
@@ -1047,6 +1060,13 @@ class BVH:
                 i += 1
                 if shadow:  # any hit will do
                     i = dr.select(hk if acts is None else ~any_mask(acts), end, i)
+                return acts, alive, betas, end, gammas, i, tris, ts
+
+            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
+            end = i + (node & ((1 << COUNT_BITS) - 1))
+            acts, alive, betas, end, gammas, i, tris, ts = dr.while_loop(
+                (acts, alive, betas, end, gammas, i, tris, ts), in_leaf, test,
+                labels=("acts", "alive", "betas", "end", "gammas", "i", "tris", "ts"))
 
             pop = alive & (sp > 0)
             if shadow:
@@ -1054,6 +1074,12 @@ class BVH:
             sp = dr.select(pop, sp - 1, sp)
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
+            return acts, alive, betas, gammas, node, sp, stack, tris, ts
+
+        acts, alive, betas, gammas, node, sp, stack, tris, ts = dr.while_loop(
+            (acts, alive, betas, gammas, node, sp, stack, tris, ts),
+            lambda acts, alive, *_: alive, walk,
+            labels=("acts", "alive", "betas", "gammas", "node", "sp", "stack", "tris", "ts"))
         return list(zip(ts, tris, betas, gammas, strict=True))
 
 
@@ -1065,7 +1091,6 @@ def inverse_direction(d):
                                for k in range(3)))
 
 
-@backend.syntax
 def inner_step(nodes, node, sp, stack, alive, os, invs, ts, far_first=False, acts=None):
     """One step of a lane at an inner node: (node, sp, alive) after it.
 
@@ -1126,8 +1151,13 @@ def inner_step(nodes, node, sp, stack, alive, os, invs, ts, far_first=False, act
     # unconditional, each step paid for Dr.Jit's test of whether the packet's stack
     # pointers agree, a dozen shuffles): the knot's shadow rays 95.2 to 92.7 ms (a
     # throwaway script, medians of 7, two runs).
-    if both:
+    def push(both, r_first, ref_l, ref_r, sp, stack):
         stack.write(dr.select(r_first, ref_l, ref_r), sp, both)
+        return both, r_first, ref_l, ref_r, sp, stack
+
+    names = ("both", "r_first", "ref_l", "ref_r", "sp", "stack")
+    *_, stack = dr.if_stmt((both, r_first, ref_l, ref_r, sp, stack), both, push,
+                           lambda *state: state, arg_labels=names, rv_labels=names)
     sp = dr.select(both, sp + 1, sp)
     # Neither: the deferred node pushed last, or the end of the ray.
     descend = hit_l | hit_r
@@ -1137,8 +1167,12 @@ def inner_step(nodes, node, sp, stack, alive, os, invs, ts, far_first=False, act
     # The pop in a branch too (a ray pops or descends, never both): the knot's shadow rays
     # 88.5-93.5 to 80.4-84.9 ms, its camera rays 67.7-70.6 to 60.0-64.3 ms (a throwaway
     # script, medians of 7, four runs).
-    if pop:
-        node = dr.select(pop, stack.read(sp, pop), node)
+    def read(node, pop, sp, stack):
+        return dr.select(pop, stack.read(sp, pop), node), pop, sp, stack
+
+    names = ("node", "pop", "sp", "stack")
+    node, *_ = dr.if_stmt((node, pop, sp, stack), pop, read, lambda *state: state,
+                          arg_labels=names, rv_labels=names)
     alive &= ~step | descend | pop
     return node, sp, alive
 

@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import drjit as dr
 import numpy as np
 
-from whitted.tracer import backend, faults, shapes
+from whitted.tracer import faults, shapes
 from whitted.tracer.backend import any_mask, jit, upload
 from whitted.tracer.shapes.base import INVALID as INVALID
 from whitted.tracer.shapes.base import UNROLL as UNROLL
@@ -243,12 +243,12 @@ class _InstanceSetBlock(_Block):
                                 acts, shadow=True)
         return blocked
 
-    @backend.syntax
     def _loop(self, os, ds, ts, prims, acts, shadow):
         """The walk of :meth:`intersect_group` (the nearest hits: ``(ts, prims)``), or with
         ``shadow`` of :meth:`occluded_group` (``ts`` the segments' ends: ``(blocked,
-        None)``), K rays a lane, as :meth:`tracer.bvh.BVH._loop` walks a mesh's tree.
-        With K = 1 the lane's ``alive`` is the ray's state."""
+        None)``), K rays a lane, as :meth:`tracer.bvh.BVH._loop` walks a mesh's tree
+        (``drjit.while_loop`` calls, as there). With K = 1 the lane's ``alive`` is the
+        ray's state."""
         from whitted.tracer.bvh import COUNT_BITS, LEAF_FLAG, inner_step, inverse_direction
 
         K = len(os)
@@ -263,25 +263,46 @@ class _InstanceSetBlock(_Block):
         if K == 1:
             acts = None
 
-        while alive:
-            while alive & ((node & LEAF_FLAG) == 0):
+        def walk(acts, alive, blocked, node, prims, sp, stack, ts):
+            def at_inner(acts, alive, node, sp, stack, ts):
+                return alive & ((node & LEAF_FLAG) == 0)
+
+            def step(acts, alive, node, sp, stack, ts):
                 node, sp, alive = inner_step(nodes, node, sp, stack, alive, os, invs, ts,
                                              shadow, acts)
+                return acts, alive, node, sp, stack, ts
+
+            acts, alive, node, sp, stack, ts = dr.while_loop(
+                (acts, alive, node, sp, stack, ts), at_inner, step,
+                labels=("acts", "alive", "node", "sp", "stack", "ts"))
 
             # The leaf's instances: the rays in each one's object space, the group asked.
-            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
-            end = i + (node & ((1 << COUNT_BITS) - 1))
-            while alive & (i < end):
+            def in_leaf(acts, alive, blocked, end, i, prims, ts):
+                return alive & (i < end)
+
+            def visit(acts, alive, blocked, end, i, prims, ts):
                 act = alive & (i < end)
                 inst = dr.gather(jit.UInt32, self.order, i, act)
                 ts, prims, blocked, acts, alive = self._visit(inst, act, os, ds, ts, prims,
                                                               blocked, acts, alive)
-                i += 1
+                return acts, alive, blocked, end, i + 1, prims, ts
+
+            i = (node & (LEAF_FLAG - 1)) >> COUNT_BITS
+            end = i + (node & ((1 << COUNT_BITS) - 1))
+            acts, alive, blocked, end, i, prims, ts = dr.while_loop(
+                (acts, alive, blocked, end, i, prims, ts), in_leaf, visit,
+                labels=("acts", "alive", "blocked", "end", "i", "prims", "ts"))
 
             pop = alive & (sp > 0)
             sp = dr.select(pop, sp - 1, sp)
             node = dr.select(pop, stack.read(sp, pop), node)
             alive &= pop
+            return acts, alive, blocked, node, prims, sp, stack, ts
+
+        acts, alive, blocked, node, prims, sp, stack, ts = dr.while_loop(
+            (acts, alive, blocked, node, prims, sp, stack, ts),
+            lambda acts, alive, *_: alive, walk,
+            labels=("acts", "alive", "blocked", "node", "prims", "sp", "stack", "ts"))
         return (blocked, None) if shadow else (ts, prims)
 
     def _visit(self, inst, act, os, ds, ts, prims, blocked, acts, alive):
@@ -522,14 +543,14 @@ class Geometry:
         return list(self._once(any_mask([a for *_, a in rays]), step, none))
 
     @staticmethod
-    @backend.syntax
     def _once(active, step, state: tuple) -> tuple:
         """``step(*state)`` in a loop that runs at most once: the SIMD packets without an
         active lane skip it, and lanes outside ``active`` keep ``state``."""
-        todo = jit.Bool(active)
-        while todo:
-            state = step(*state)
-            todo = jit.Bool(False)
+        def body(state, todo):
+            return step(*state), jit.Bool(False)
+
+        state, _ = dr.while_loop((state, jit.Bool(active)), lambda state, todo: todo, body,
+                                 labels=("state", "todo"))
         return state
 
     def surface(self, hit: Hit, o, d) -> Surface:

@@ -35,7 +35,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from whitted.tracer import backend, faults
+from whitted.tracer import faults
 from whitted.tracer.backend import deferred, jit, upload, upload_rows
 from whitted.tracer.settings import Table, read_steps
 
@@ -232,14 +232,18 @@ class TableBlock(Block):
             return self._unrolled(o, d, t, prim)
         return self._looped(o, d, t, prim, active)
 
-    @backend.syntax
     def _looped(self, o, d, t, prim, active):
-        i = jit.UInt32(0)
-        count = dr.opaque(jit.UInt32, self.count)
-        while active & (i < count):
+        # drjit.while_loop, not a `while` under drjit.syntax: the decorator parses and
+        # recompiles the source in every process (tracer.backend.syntax).
+        def body(active, count, d, i, o, prim, t):
             ti, hit = self.test(o, d, t, i)
             t, prim = self._update(ti, hit, i, t, prim)
-            i += 1
+            return active, count, d, i + 1, o, prim, t
+
+        names = ("active", "count", "d", "i", "o", "prim", "t")
+        *_, prim, t = dr.while_loop(
+            (active, dr.opaque(jit.UInt32, self.count), d, jit.UInt32(0), o, prim, t),
+            lambda active, count, d, i, *_: active & (i < count), body, labels=names)
         return t, prim
 
 
