@@ -175,8 +175,8 @@ def syntax(fn):
 
     Loops that every render runs (the BVH walks of :mod:`tracer.bvh` and
     :mod:`tracer.geometry`, a block's loop over its shapes) are written as
-    ``drjit.while_loop`` and ``drjit.if_stmt`` calls instead, with the state the
-    decorator would give them (the same kernels, hash for hash): their
+    ``drjit.while_loop`` and ``drjit.if_stmt`` calls instead, which trace the
+    same kernels as the decorated ``while`` and ``if`` did (hash for hash): their
     transformation took about 26 ms of every ``whitted render`` of a mesh
     (issue 33). This decorator stays for the BVH build's loops, which run only
     where a tree is built.

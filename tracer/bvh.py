@@ -995,10 +995,10 @@ class BVH:
         kind of work at the same time. With K = 1 a lane is one ray; with K > 1,
         ``acts`` says which rays still take part (a shadow ray leaves when blocked).
 
-        The loops are written as ``drjit.while_loop`` calls (the symbolic loops that
-        ``drjit.syntax`` makes of ``while`` statements, with the same state): the
-        decorator parses and recompiles a function's source in every process, about
-        10 ms for this one (see :func:`tracer.backend.syntax`).
+        The loops are written as ``drjit.while_loop`` calls, the symbolic loops that
+        ``drjit.syntax`` made of ``while`` statements (the same kernel, hash for hash):
+        the decorator parses and recompiles a function's source in every process,
+        about 10 ms for this one (see :func:`tracer.backend.syntax`).
         """
         K = len(os)
         n = dr.width(ts[0])
