@@ -743,10 +743,22 @@ def _fresh_env(folder: Path) -> dict:
 
 
 def _timed_process(cmd: list, env: dict | None) -> float:
+    return _timed_process_cpu(cmd, env)[0]
+
+
+def _timed_process_cpu(cmd: list, env: dict | None) -> tuple[float, float]:
+    """(wall seconds, CPU seconds: user and system time of the process and its children)
+    of one run of ``cmd``. On the 2-core machine a process that keeps both cores busy
+    shows CPU time near twice its wall time: work moved onto a thread then gains nothing."""
+    import resource
+
+    before = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
     subprocess.run([str(c) for c in cmd], env=env, check=True, stdout=subprocess.DEVNULL,
                    stderr=subprocess.DEVNULL)
-    return time.perf_counter() - t0
+    wall = time.perf_counter() - t0
+    after = resource.getrusage(resource.RUSAGE_CHILDREN)
+    return wall, (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
 
 
 #: `whitted` run by a Python command line, for a baseline checkout (PYTHONPATH chooses it).
@@ -797,17 +809,21 @@ def cmd_process(args) -> int:
                     for _, cmd, extra in sides:
                         _timed_process(cmd, _with_env(None, extra))
                 times = {name: [] for name, _, _ in sides}
+                cpu = {name: [] for name, _, _ in sides}
                 for _ in range(args.repeat):
                     for name, cmd, extra in sides:
                         env = _fresh_env(tmp) if fresh else None
-                        times[name].append(_timed_process(cmd, _with_env(env, extra)))
+                        wall, used = _timed_process_cpu(cmd, _with_env(env, extra))
+                        times[name].append(wall)
+                        cpu[name].append(used)
                 m = statistics.median(times[sides[-1][0]])
                 for name, _, _ in sides:
                     t = statistics.median(times[name])
                     ratio = "" if name == sides[-1][0] else (
                         f"  ratio to Mitsuba {t / m:.2f} (target <= 1.0: {verdict(t <= m)})")
                     print(f"    {label}: {name:<34} {t:6.2f} s [{min(times[name]):.2f}-"
-                          f"{max(times[name]):.2f}]{ratio}", flush=True)
+                          f"{max(times[name]):.2f}], CPU {statistics.median(cpu[name]):.2f} s"
+                          f"{ratio}", flush=True)
             splits = [(f"tracer ({lab})", [sys.executable, split, scene, tmp / "s.exr"],
                        extra, ("import", "mesh read", "rest of scene load", "Dr.Jit start",
                                "Integrator (BVH)", LLVM_COLUMN, "render", LLVM_COLUMN, "EXR"))

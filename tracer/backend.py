@@ -161,42 +161,6 @@ def deferred(name: str):
     return _Deferred(name)
 
 
-def syntax(fn):
-    """``drjit.syntax`` (symbolic loops and branches written as Python ones), applied
-    when ``fn`` is first called rather than when its module is imported.
-
-    The decorator parses and recompiles the function's source, about 5-15 ms
-    each; applied at import, every ``whitted`` process paid it for loops its
-    scene never runs (about 27 ms of a 0.5 s render, measured with cProfile).
-    The transformed function is kept in memory for the process only: code is
-    never read from or written to a cache on disk (:mod:`tracer.cache`), so
-    nothing a file holds can run. Methods work as with ``drjit.syntax``: the
-    wrapper receives ``self``.
-
-    Loops that every render runs (the BVH walks of :mod:`tracer.bvh` and
-    :mod:`tracer.geometry`, a block's loop over its shapes) are written as
-    ``drjit.while_loop`` and ``drjit.if_stmt`` calls instead, which trace the
-    same kernels as the decorated ``while`` and ``if`` did (hash for hash): their
-    transformation took about 26 ms of every ``whitted render`` of a mesh
-    (issue 33). This decorator stays for the BVH build's loops, which run only
-    where a tree is built.
-    """
-    import functools
-
-    done = None
-
-    @functools.wraps(fn)
-    def wrapper(*args, **kwargs):
-        nonlocal done
-        if done is None:
-            import drjit as dr
-
-            done = dr.syntax(fn)
-        return done(*args, **kwargs)
-
-    return wrapper
-
-
 def lesser(a, b):
     """The smaller of ``a`` and ``b`` for values that are never NaN: ``select(a < b, a, b)``.
 

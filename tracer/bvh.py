@@ -601,7 +601,6 @@ def _large_nodes(lo, hi, h_first, h_cnt, h_big, nbmax, bins, chunk, small):
     return tuple(out)
 
 
-@backend.syntax
 def _chunk_boxes(lo, hi, first, cnt, stride=1, centroids=None):
     """Per chunk (a lane): the box and the centroid box of boxes first + j stride, j < cnt.
 
@@ -613,8 +612,8 @@ def _chunk_boxes(lo, hi, first, cnt, stride=1, centroids=None):
     S = dr.width(first)
     b_lo, b_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
     c_lo, c_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
-    j = dr.zeros(U, S)
-    while j < cnt:
+
+    def body(b_hi, b_lo, c_hi, c_lo, j):
         k = first + j * stride
         tl = dr.gather(A3, lo, k)
         th = dr.gather(A3, hi, k)
@@ -624,11 +623,14 @@ def _chunk_boxes(lo, hi, first, cnt, stride=1, centroids=None):
             cl, ch = dr.gather(A3, centroids[0], k), dr.gather(A3, centroids[1], k)
         b_lo, b_hi = lesser(b_lo, tl), greater(b_hi, th)
         c_lo, c_hi = lesser(c_lo, cl), greater(c_hi, ch)
-        j += 1
+        return b_hi, b_lo, c_hi, c_lo, j + 1
+
+    b_hi, b_lo, c_hi, c_lo, _ = dr.while_loop(
+        (b_hi, b_lo, c_hi, c_lo, dr.zeros(U, S)), lambda *state: state[-1] < cnt, body,
+        labels=("b_hi", "b_lo", "c_hi", "c_lo", "j"))
     return b_lo, b_hi, c_lo, c_hi
 
 
-@backend.syntax
 def _sum_bin_chunks(node, q, n_first, n_nc, per, k_n, k_blo, k_bhi):
     """Per (node, bin) (a lane): the count and box of the bin over the node's chunks."""
     A3, U = jit.Array3f, jit.UInt32
@@ -637,17 +639,20 @@ def _sum_bin_chunks(node, q, n_first, n_nc, per, k_n, k_blo, k_bhi):
     b_lo, b_hi = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S)
     f = dr.gather(U, n_first, node)
     m = dr.gather(U, n_nc, node)
-    j = dr.zeros(U, S)
-    while j < m:
+
+    def body(b_hi, b_lo, j, n):
         k = (f + j) * per + q
-        n += dr.gather(U, k_n, k)
+        n = n + dr.gather(U, k_n, k)
         b_lo = lesser(b_lo, dr.gather(A3, k_blo, k))
         b_hi = greater(b_hi, dr.gather(A3, k_bhi, k))
-        j += 1
+        return b_hi, b_lo, j + 1, n
+
+    b_hi, b_lo, _, n = dr.while_loop((b_hi, b_lo, dr.zeros(U, S), n),
+                                     lambda b_hi, b_lo, j, n: j < m, body,
+                                     labels=("b_hi", "b_lo", "j", "n"))
     return n, b_lo, b_hi
 
 
-@backend.syntax
 def _chunk_bins(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax):
     """Per chunk (a lane): count and box of each bin of each axis, ``3 nbmax`` per chunk."""
     U, A3 = jit.UInt32, jit.Array3f
@@ -658,16 +663,20 @@ def _chunk_bins(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax):
     k_n = dr.empty(U, S * per)
     k_lo, k_hi = dr.empty(A3, S * per), dr.empty(A3, S * per)
     base = dr.arange(U, S) * per
-    i = dr.zeros(U, S)
-    while i < per:
+
+    def body(hi_bin, i, k_hi, k_lo, k_n, lo_bin, n_bin):
         dr.scatter(k_n, n_bin[i], base + i)
         dr.scatter(k_lo, A3(lo_bin[0][i], lo_bin[1][i], lo_bin[2][i]), base + i)
         dr.scatter(k_hi, A3(hi_bin[0][i], hi_bin[1][i], hi_bin[2][i]), base + i)
-        i += 1
+        return hi_bin, i + 1, k_hi, k_lo, k_n, lo_bin, n_bin
+
+    _, _, k_hi, k_lo, k_n, _, _ = dr.while_loop(
+        (hi_bin, dr.zeros(U, S), k_hi, k_lo, k_n, lo_bin, n_bin),
+        lambda hi_bin, i, *_: i < per, body,
+        labels=("hi_bin", "i", "k_hi", "k_lo", "k_n", "lo_bin", "n_bin"))
     return k_n, k_lo, k_hi
 
 
-@backend.syntax
 def _bin_triangles(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax, active):
     """Bins of triangles first + j stride, j < cnt, in local memory: axis a, bin b at a nbmax + b.
 
@@ -678,8 +687,8 @@ def _bin_triangles(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax, active):
     n_bin = dr.alloc_local(U, 3 * nbmax, U(0))
     lo_bin = [dr.alloc_local(F, 3 * nbmax, F(dr.inf)) for _ in range(3)]
     hi_bin = [dr.alloc_local(F, 3 * nbmax, F(-dr.inf)) for _ in range(3)]
-    j = dr.zeros(U, S)
-    while active & (j < cnt):
+
+    def body(hi_bin, j, lo_bin, n_bin):
         k = first + j * stride
         tl = dr.gather(A3, lo, k)
         th = dr.gather(A3, hi, k)
@@ -690,11 +699,15 @@ def _bin_triangles(lo, hi, first, cnt, stride, c_lo, scale, nb, nbmax, active):
             for m in range(3):
                 lo_bin[m][q] = lesser(lo_bin[m][q], tl[m])
                 hi_bin[m][q] = greater(hi_bin[m][q], th[m])
-        j += 1
+        return hi_bin, j + 1, lo_bin, n_bin
+
+    hi_bin, _, lo_bin, n_bin = dr.while_loop(
+        (hi_bin, dr.zeros(U, S), lo_bin, n_bin),
+        lambda hi_bin, j, *_: active & (j < cnt), body,
+        labels=("hi_bin", "j", "lo_bin", "n_bin"))
     return n_bin, lo_bin, hi_bin
 
 
-@backend.syntax
 def _small_nodes(lo, hi, first, cnt, nb, active, nbmax):
     """Per small node (a lane each, where ``active``): its box, centroid box and cheapest split.
 
@@ -709,33 +722,43 @@ def _small_nodes(lo, hi, first, cnt, nb, active, nbmax):
     n_bin, lo_bin, hi_bin = _bin_triangles(lo, hi, first, cnt, 1, c_lo, scale, nb, nbmax, active)
     best, best_axis, best_bin = dr.full(F, dr.inf, S), dr.zeros(U, S), dr.zeros(U, S)
     right = dr.alloc_local(F, nbmax, F(0))
+    names = ("hi_bin", "i", "lo_bin", "n_bin", "right", "run_hi", "run_lo", "run_n")
     for a in range(3):
-        run_lo, run_hi, run_n = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S), dr.zeros(U, S)
-        i = nb - 1
-        while active & (i > 0):
+        def from_right(hi_bin, i, lo_bin, n_bin, right, run_hi, run_lo, run_n, a=a):
             q = a * nbmax + i
             run_lo = lesser(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
             run_hi = greater(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
-            run_n += n_bin[q]
+            run_n = run_n + n_bin[q]
             right[i] = _half_area_jit(run_lo, run_hi) * F(run_n)
-            i -= 1
-        run_lo, run_hi, run_n = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S), dr.zeros(U, S)
-        i = dr.zeros(U, S)
-        while active & (i + 1 < nb):
+            return hi_bin, i - 1, lo_bin, n_bin, right, run_hi, run_lo, run_n
+
+        hi_bin, _, lo_bin, n_bin, right, *_ = dr.while_loop(
+            (hi_bin, nb - 1, lo_bin, n_bin, right, dr.full(A3, -dr.inf, S),
+             dr.full(A3, dr.inf, S), dr.zeros(U, S)),
+            lambda hi_bin, i, *_: active & (i > 0), from_right, labels=names)
+
+        def from_left(best, best_axis, best_bin, hi_bin, i, lo_bin, n_bin, right, run_hi,
+                      run_lo, run_n, a=a):
             q = a * nbmax + i
             run_lo = lesser(run_lo, A3(lo_bin[0][q], lo_bin[1][q], lo_bin[2][q]))
             run_hi = greater(run_hi, A3(hi_bin[0][q], hi_bin[1][q], hi_bin[2][q]))
-            run_n += n_bin[q]
+            run_n = run_n + n_bin[q]
             cost = _half_area_jit(run_lo, run_hi) * F(run_n) + right[i + 1]
             better = (scale[a] > 0) & (run_n > 0) & (run_n < cnt) & (cost < best)
             best = dr.select(better, cost, best)
             best_axis = dr.select(better, U(a), best_axis)
             best_bin = dr.select(better, i, best_bin)
-            i += 1
+            return (best, best_axis, best_bin, hi_bin, i + 1, lo_bin, n_bin, right, run_hi,
+                    run_lo, run_n)
+
+        best, best_axis, best_bin, hi_bin, _, lo_bin, n_bin, right, *_ = dr.while_loop(
+            (best, best_axis, best_bin, hi_bin, dr.zeros(U, S), lo_bin, n_bin, right,
+             dr.full(A3, -dr.inf, S), dr.full(A3, dr.inf, S), dr.zeros(U, S)),
+            lambda best, best_axis, best_bin, hi_bin, i, *_: active & (i + 1 < nb),
+            from_left, labels=("best", "best_axis", "best_bin", *names))
     return best, best_axis, best_bin, b_lo, b_hi, c_lo, c_hi
 
 
-@backend.syntax
 def _sweep(b_cnt, b_lo, b_hi, off, nb, cnt):
     """Per node, the cheapest binned split along one axis: (A_L n_L + A_R n_R, last left bin).
 
@@ -746,29 +769,37 @@ def _sweep(b_cnt, b_lo, b_hi, off, nb, cnt):
     F, U, A3 = jit.Float, jit.UInt32, jit.Array3f
     S = dr.width(off)
     right = dr.zeros(F, dr.width(b_cnt))
-    run_lo, run_hi, run_n = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S), dr.zeros(U, S)
-    i = nb - 1
-    while (nb > 0) & (i > 0):  # nb = 0: a node not binned here
+    names = ("i", "right", "run_hi", "run_lo", "run_n")
+
+    def from_right(i, right, run_hi, run_lo, run_n):
         k = off + i
         run_lo = lesser(run_lo, dr.gather(A3, b_lo, k))
         run_hi = greater(run_hi, dr.gather(A3, b_hi, k))
-        run_n += dr.gather(U, b_cnt, k)
+        run_n = run_n + dr.gather(U, b_cnt, k)
         dr.scatter(right, _half_area_jit(run_lo, run_hi) * F(run_n), k)
-        i -= 1
+        return i - 1, right, run_hi, run_lo, run_n
+
+    _, right, *_ = dr.while_loop(
+        (nb - 1, right, dr.full(A3, -dr.inf, S), dr.full(A3, dr.inf, S), dr.zeros(U, S)),
+        lambda i, *_: (nb > 0) & (i > 0),  # nb = 0: a node not binned here
+        from_right, labels=names)
     dr.eval(right)
-    best, at = dr.full(F, dr.inf, S), dr.zeros(U, S)
-    run_lo, run_hi, run_n = dr.full(A3, dr.inf, S), dr.full(A3, -dr.inf, S), dr.zeros(U, S)
-    i = dr.zeros(U, S)
-    while i + 1 < nb:
+
+    def from_left(at, best, i, right, run_hi, run_lo, run_n):
         k = off + i
         run_lo = lesser(run_lo, dr.gather(A3, b_lo, k))
         run_hi = greater(run_hi, dr.gather(A3, b_hi, k))
-        run_n += dr.gather(U, b_cnt, k)
+        run_n = run_n + dr.gather(U, b_cnt, k)
         cost = _half_area_jit(run_lo, run_hi) * F(run_n) + dr.gather(F, right, k + 1)
         better = (run_n > 0) & (run_n < cnt) & (cost < best)
         best = dr.select(better, cost, best)
         at = dr.select(better, i, at)
-        i += 1
+        return at, best, i + 1, right, run_hi, run_lo, run_n
+
+    at, best, *_ = dr.while_loop(
+        (dr.zeros(U, S), dr.full(F, dr.inf, S), dr.zeros(U, S), right,
+         dr.full(A3, -dr.inf, S), dr.full(A3, dr.inf, S), dr.zeros(U, S)),
+        lambda at, best, i, *_: i + 1 < nb, from_left, labels=("at", "best", *names))
     return best, at
 
 
@@ -995,10 +1026,10 @@ class BVH:
         kind of work at the same time. With K = 1 a lane is one ray; with K > 1,
         ``acts`` says which rays still take part (a shadow ray leaves when blocked).
 
-        The loops are written as ``drjit.while_loop`` calls, the symbolic loops that
-        ``drjit.syntax`` made of ``while`` statements (the same kernel, hash for hash):
-        the decorator parses and recompiles a function's source in every process,
-        about 10 ms for this one (see :func:`tracer.backend.syntax`).
+        The loops are ``drjit.while_loop`` calls (docs/extending.md, "Loops"): the same
+        kernel, hash for hash, as the ``while`` statements that ``drjit.syntax`` turned
+        into them, without parsing and recompiling this function's source in every
+        process (about 10 ms).
         """
         K = len(os)
         n = dr.width(ts[0])

@@ -13,7 +13,7 @@ reaches it instead.
 
 Why coverage.py rather than a tracer of our own (``sys.settrace``): it is the field's
 tool, well kept, and its C tracer is fast; a Dr.Jit kernel is built by running its
-Python once (``dr.syntax`` loops and ``dr.if_stmt`` branches are traced, both sides of
+Python once (``dr.while_loop`` loops and ``dr.if_stmt`` branches are traced, both sides of
 a branch), so a line that went into some kernel is a line coverage saw run, and one
 it did not see is in no kernel of any scene.
 

@@ -233,8 +233,7 @@ class TableBlock(Block):
         return self._looped(o, d, t, prim, active)
 
     def _looped(self, o, d, t, prim, active):
-        # drjit.while_loop, not a `while` under drjit.syntax: the decorator parses and
-        # recompiles the source in every process (tracer.backend.syntax).
+        # drjit.while_loop, not a `while` under drjit.syntax (docs/extending.md, "Loops").
         def body(active, count, d, i, o, prim, t):
             ti, hit = self.test(o, d, t, i)
             t, prim = self._update(ti, hit, i, t, prim)

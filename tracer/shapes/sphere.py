@@ -23,7 +23,7 @@ import numpy as np
 
 from whitted.tracer import faults
 from whitted.tracer import transform as tf
-from whitted.tracer.backend import deferred, jit, syntax
+from whitted.tracer.backend import deferred, jit
 from whitted.tracer.settings import Matrix, Table, Vec3, as_tuple, check_transform
 from whitted.tracer.shapes import base
 
@@ -209,14 +209,15 @@ class Block(base.TableBlock):
             hit |= occludes(o, d, self.get("c", i), self.get("r", i), tmax)
         return hit
 
-    @syntax
     def _occluded_looped(self, o, d, tmax, active):
-        i = jit.UInt32(0)
-        hit = dr.zeros(jit.Bool, dr.width(tmax))
-        count = dr.opaque(jit.UInt32, self.count)
-        while active & ~hit & (i < count):
-            hit = occludes(o, d, self.get("c", i), self.get("r", i), tmax)
-            i += 1
+        def body(active, count, hit, i):
+            return active, count, occludes(o, d, self.get("c", i), self.get("r", i), tmax), i + 1
+
+        _, _, hit, _ = dr.while_loop(
+            (active, dr.opaque(jit.UInt32, self.count), dr.zeros(jit.Bool, dr.width(tmax)),
+             jit.UInt32(0)),
+            lambda active, count, hit, i: active & ~hit & (i < count), body,
+            labels=("active", "count", "hit", "i"))
         return hit
 
     def surface(self, k, o, d, t, mask):
