@@ -184,9 +184,10 @@ def sah_cost(lo, hi, count, inner, traversal_cost: float = 2.0,
 
 #: Box sets of at most this many boxes (the instances of a group in most scenes) are built
 #: on the host by :func:`_small_box_tree`, not by the device builder, whose first call in a
-#: process (its loops' syntax transformed, its kernels read from the cache, a wait for
-#: the device at each level) took 40-60 ms for 4 boxes, and later calls 15 ms (a throwaway
-#: script); the host takes well under a millisecond for a few boxes.
+#: process (its kernels read from the cache, a wait for the device at each level, and then
+#: its loops' source transformed by drjit.syntax) took 40-60 ms for 4 boxes, and later
+#: calls 15 ms (a throwaway script); the host takes well under a millisecond for a few
+#: boxes.
 SMALL_BOX_SET = 64
 
 
