@@ -609,6 +609,16 @@ scene = mi.load_file(sys.argv[1])
 mi.util.write_bitmap(sys.argv[2], mi.render(scene))
 """
 
+#: The split scripts' llvm(): the seconds LLVM has spent compiling kernels so far in the
+#: process (Dr.Jit's kernel history: the JIT kernels not found in its cache); called once
+#: here to start the count.
+_LLVM_SECONDS = """dr.set_flag(dr.JitFlag.KernelHistory, True)
+def llvm():
+    return sum(k["backend_time"] for k in dr.kernel_history()
+               if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
+llvm()
+"""
+
 #: Mitsuba's side of :data:`MITSUBA_PROCESS`, split the same way: import (with the
 #: variant set), scene load (its meshes read and Embree's build), render, EXR; after the
 #: load and the render, the seconds LLVM spent compiling their kernels (Dr.Jit's kernel
@@ -619,12 +629,7 @@ t0 = time.perf_counter()
 import drjit as dr
 import mitsuba as mi
 mi.set_variant("llvm_ad_rgb")
-dr.set_flag(dr.JitFlag.KernelHistory, True)
-def llvm():
-    return sum(k["backend_time"] for k in dr.kernel_history()
-               if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
-llvm()
-t1 = time.perf_counter()
+""" + _LLVM_SECONDS + """t1 = time.perf_counter()
 scene = mi.load_file(sys.argv[1])
 t2 = time.perf_counter()
 c1 = llvm()
@@ -667,12 +672,7 @@ from whitted.tracer import backend
 backend.use()
 import drjit as dr
 from whitted.tracer.integrator import Integrator
-dr.set_flag(dr.JitFlag.KernelHistory, True)
-def llvm():
-    return sum(k["backend_time"] for k in dr.kernel_history()
-               if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
-llvm()
-t3 = time.perf_counter()
+""" + _LLVM_SECONDS + """t3 = time.perf_counter()
 integ = Integrator(scene)
 t4 = time.perf_counter()
 c1 = llvm()
