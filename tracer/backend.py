@@ -101,6 +101,30 @@ def new_scope() -> None:
     dr.detail.new_scope(dr.JitBackend.CUDA if name() == "cuda" else dr.JitBackend.LLVM)
 
 
+def llvm_vector_width() -> int | None:
+    """Lanes of the LLVM backend's SIMD packets on this CPU (16 with AVX-512, 8 with
+    AVX/AVX2, 4 with SSE or NEON), or None where it cannot be asked.
+
+    Dr.Jit 1.5's Python API does not expose it; libdrjit-core exports
+    ``jit_llvm_vector_width()`` (a C++ function, so its name is mangled), read here
+    through ctypes after the backend's first array has started the LLVM backend.
+    """
+    import drjit as dr
+
+    if name() != "llvm":
+        return None
+    dr.llvm.UInt32(0)   # starts the LLVM backend (its target, so its width) if not yet
+    try:
+        core = ctypes.CDLL(os.path.join(os.path.dirname(dr.__file__), "libdrjit-core.so"))
+        width = core["_Z21jit_llvm_vector_widthv"]
+    except (OSError, AttributeError):
+        return None
+    width.restype = ctypes.c_uint32
+    width.argtypes = []
+    value = int(width())
+    return value if value in (1, 2, 4, 8, 16, 32, 64) else None
+
+
 def host3(v) -> np.ndarray:
     """(n, 3) numpy copy of an Array3f, a component at a time: ``v.numpy()`` of a
     3-vector runs a kernel with the width written into it, compiled anew for each

@@ -50,7 +50,7 @@ A lane may also carry K rays that walk the tree together, as a packet
 node and triangle read once for the K rays. On a CPU a node step's time goes
 to reading its record, per lane (Dr.Jit has no load that the lanes of a SIMD
 packet share), while the K slab tests are cheap; the integrator gives a lane
-K samples of one pixel (:data:`tracer.integrator.GROUP`). The knot of
+K samples of one pixel (:data:`tracer.integrator.GROUPS`). The knot of
 ``benchmarks/bench_mesh.py``, its camera rays alone: 86 to 58 ms with K = 4,
 its shadow rays 75 to 50 ms (a throwaway script, medians of 5).
 

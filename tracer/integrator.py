@@ -55,7 +55,7 @@ counts are summed on the device and read when the render ends. A batch
 carries only what cannot be recomputed (ray, weight, sample slot).
 
 In a scene with a triangle mesh, placed or instanced, the camera level gives
-each lane K samples of one pixel (:data:`GROUP`, :attr:`Integrator.group`): the
+each lane K samples of one pixel (:data:`GROUPS`, :attr:`Integrator.group`): the
 K rays walk the mesh's BVH together, reading each node once
 (:meth:`Geometry.closest_hit_group`), and a hierarchy of instances too, and so
 do their shadow rays to each light; the rest of the shading is done for
@@ -131,14 +131,36 @@ SCHEDULES = ("auto", "wavefront", "stack")
 SEEDS_PER_LANE_SAMPLE = 4
 
 #: Camera rays a lane (:attr:`Integrator.group`) where the scene has a mesh (placed, or in
-#: an instanced group): the lane's rays walk the BVH as a packet, reading each node and
-#: triangle once for all of them (:meth:`tracer.bvh.BVH.closest_hit_group`; instances:
+#: an instanced group), by the lanes of Dr.Jit's SIMD packets on this CPU
+#: (:func:`tracer.backend.llvm_vector_width`): the lane's rays walk the BVH as a packet,
+#: reading each node and triangle once for all of them
+#: (:meth:`tracer.bvh.BVH.closest_hit_group`; instances:
 #: :meth:`tracer.geometry._InstanceSetBlock.intersect_group`). A lane's K rays are K
 #: consecutive samples of one pixel (K divides the samples of a pixel), so their walks
-#: nearly coincide. The render of ``benchmarks/bench_mesh.py``'s scene (144,000 triangles,
-#: 640x480, 16 spp; a throwaway script, medians of 7, two rounds): K = 1 249 ms,
-#: 2 190-197 ms, 4 177-185 ms, 8 186-188 ms.
-GROUP = 4
+#: nearly coincide. Each ray of a packet holds its own registers through the walk, so a
+#: larger K also means a larger kernel, which costs LLVM more time to compile the more it
+#: spills: AVX-512 has 32 vector registers, AVX2 16.
+#: ``python benchmarks/bench_group.py`` prints, for each K, a fresh process's compile
+#: seconds and the warm render of ``bench_speed.py process``'s two scenes:
+#:
+#: - 16 lanes (AVX-512): the render of ``benchmarks/bench_mesh.py``'s scene (144,000
+#:   triangles, 640x480, 16 spp; a throwaway script of an earlier round, medians of 7):
+#:   K = 1 249 ms, 2 190-197 ms, 4 177-185 ms, 8 186-188 ms. K = 4.
+#: - 8 lanes (AVX2, an AMD EPYC of the Zen 3 family, ``bench_group.py``): LLVM's seconds
+#:   for K = 1, 2, 4, 8: 0.6, 1.0, 2.3, 6.3; the warm render of the torus 1.31, 0.92, 0.89,
+#:   0.77 s, of the knot 0.72, 0.56, 0.68, 0.58 s. K = 2: K = 4 compiles 1.3 s longer for
+#:   a torus 3 % faster and a knot 20 % slower; K = 8 compiles 5.3 s longer for a torus
+#:   0.14 s faster and a knot no faster.
+GROUPS = {16: 4, 8: 2}
+
+#: K where Dr.Jit's packets have another width (4 lanes: SSE, NEON; not measured) or the
+#: width is unknown: the smaller of the measured kernels.
+GROUP_ELSEWHERE = 2
+
+
+def default_group() -> int:
+    """K for a scene with a mesh on this machine's LLVM backend (:data:`GROUPS`)."""
+    return GROUPS.get(backend.llvm_vector_width(), GROUP_ELSEWHERE)
 
 
 @dataclass
@@ -392,7 +414,7 @@ class Integrator:
         self.schedule = schedule
         if group is None:
             # Measured on the CPU only; a GPU (none was lent) keeps one ray a thread.
-            group = GROUP if self.geo.has_mesh and backend.name() == "llvm" else 1
+            group = default_group() if self.geo.has_mesh and backend.name() == "llvm" else 1
         if group < 1:
             raise ValueError(f"group must be at least 1, not {group}")
         #: Camera rays a lane in the wavefront schedule: the K samples of a pixel that a

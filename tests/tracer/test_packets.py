@@ -20,7 +20,7 @@ from whitted import tracer  # noqa: F401  (chooses libLLVM before drjit loads)
 from whitted.tracer import load_scene
 from whitted.tracer.bvh import BVH, INVALID
 from whitted.tracer.geometry import Geometry, _InstanceBlock, _InstanceSetBlock
-from whitted.tracer.integrator import GROUP, Integrator
+from whitted.tracer.integrator import GROUP_ELSEWHERE, GROUPS, Integrator, default_group
 
 
 def _rays(rng, n, k, coherent):
@@ -161,8 +161,8 @@ def test_instances_answer_a_group_as_they_answer_each_ray(jit, tmp_path, coheren
 def test_a_render_of_instanced_meshes_with_k_rays_a_lane_equals_one_ray_a_lane(tmp_path):
     scene = _instanced_knots(tmp_path).with_overrides(size=(48, 36), spp=8)
     one = Integrator(scene, group=1, schedule="wavefront").render(moments=True)
-    packed = Integrator(scene, group=GROUP, schedule="wavefront").render(moments=True)
-    assert Integrator(scene).group == GROUP
+    packed = Integrator(scene, group=default_group(), schedule="wavefront").render(moments=True)
+    assert Integrator(scene).group == default_group()
     assert one.image.any()
     np.testing.assert_array_equal(packed.image, one.image)
     np.testing.assert_array_equal(packed.variance, one.variance)
@@ -203,7 +203,7 @@ def _render(scene, options, group, seeds=None):
 def test_the_renders_of_k_rays_a_lane_equal_one_ray_a_lane(tmp_path, name, change, options):
     scene = _scene(tmp_path, change, max_depth=4 if name == "glass floor" else None)
     one = _render(scene, options, 1)
-    packed = _render(scene, options, GROUP)
+    packed = _render(scene, options, default_group())
     for a, b in zip(one, packed, strict=True):
         assert a.image.any()
         np.testing.assert_array_equal(b.image, a.image)
@@ -215,17 +215,48 @@ def test_the_renders_of_k_rays_a_lane_equal_one_ray_a_lane(tmp_path, name, chang
     assert (len(one[0].rays_per_level) > 1) == (name == "glass floor")
 
 
+@pytest.mark.parametrize("k", sorted({*GROUPS.values(), GROUP_ELSEWHERE} - {1}))
+def test_every_k_the_tracer_may_choose_renders_as_one_ray_a_lane(tmp_path, k):
+    """The K of every CPU width (not only this machine's) gives the image of K = 1."""
+    scene = _scene(tmp_path, None)
+    one, packed = _render(scene, {}, 1)[0], _render(scene, {}, k)[0]
+    assert one.image.any()
+    np.testing.assert_array_equal(packed.image, one.image)
+    assert packed.shadow_rays_per_level == one.shadow_rays_per_level
+
+
+def test_k_follows_the_width_of_dr_jits_packets(monkeypatch):
+    """AVX-512's 16 lanes: K = 4; AVX2's 8: K = 2; another or an unknown width: the
+    smaller kernel (tracer/integrator.py's GROUPS, measured by benchmarks/bench_group.py)."""
+    from whitted.tracer import backend
+
+    for width, k in ((16, 4), (8, 2), (4, GROUP_ELSEWHERE), (None, GROUP_ELSEWHERE)):
+        monkeypatch.setattr(backend, "llvm_vector_width", lambda width=width: width)
+        assert default_group() == k
+        assert Integrator(load_scene(KNOT)).group == k
+
+
+def test_dr_jit_reports_its_packet_width():
+    """The width is read from libdrjit-core (not a public Python API): a drjit upgrade
+    that renames the function must fail here rather than silently fall back."""
+    from whitted.tracer import backend
+
+    if backend.name() != "llvm":
+        pytest.skip("the LLVM backend's width")
+    assert backend.llvm_vector_width() in (4, 8, 16)
+
+
 def test_several_seeds_a_render_with_k_rays_a_lane(tmp_path):
     scene = _scene(tmp_path, None)
     one = _render(scene, {}, 1, seeds=(3, 4))
-    packed = _render(scene, {}, GROUP, seeds=(3, 4))
+    packed = _render(scene, {}, default_group(), seeds=(3, 4))
     for a, b in zip(one, packed, strict=True):
         np.testing.assert_array_equal(b.image, a.image)
         assert b.shadow_rays_per_level == a.shadow_rays_per_level
 
 
 def test_a_scene_with_a_mesh_groups_its_camera_rays_and_others_do_not():
-    assert Integrator(load_scene(KNOT)).group == GROUP > 1
+    assert Integrator(load_scene(KNOT)).group == default_group() > 1
     assert Integrator(load_scene(KNOT.parent / "three_lights.toml")).group == 1
     with pytest.raises(ValueError, match="group"):
         Integrator(load_scene(KNOT), group=0)
@@ -236,6 +267,6 @@ def test_a_chunk_whose_samples_do_not_divide_into_groups_is_traced_one_ray_a_lan
     equals the one of one ray a lane."""
     scene = load_scene(KNOT).with_overrides(size=(5, 3), spp=1)
     a = Integrator(scene, group=1).render()
-    b = Integrator(scene, group=GROUP).render()
+    b = Integrator(scene, group=default_group()).render()
     np.testing.assert_array_equal(b.image, a.image)
     assert b.rays_per_level == a.rays_per_level == [15]

@@ -165,7 +165,7 @@ class Block:
     any_hit = False
 
     #: whether a triangle mesh's BVH is walked, here or in an instanced group (the
-    #: integrator then traces a pixel's samples K to a lane, tracer/integrator.py's GROUP)
+    #: integrator then traces a pixel's samples K to a lane, tracer/integrator.py's GROUPS)
     has_mesh = False
 
     def occluded(self, o, d, tmax, active):
