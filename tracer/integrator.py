@@ -116,6 +116,10 @@ SIGNIFICANT_WEIGHT = 1e-3
 #: each, written out in the kernel (:meth:`Integrator._render_stack`); deeper, a loop.
 UNROLLED_LEVELS = 64
 
+#: :meth:`Integrator._light_samples`'s "which sum" of a sampled light whose seeds a lane
+#: carries (shared ray trees): its shadow rays are cast in a loop, one seed a pass.
+SEED_LOOP = -2
+
 #: How the recursion is scheduled (:class:`Integrator`'s ``schedule``).
 SCHEDULES = ("auto", "wavefront", "stack")
 
@@ -219,14 +223,6 @@ class _Batch:
                                 max_depth)
         pixel, s, k = pixel_seed_and_sample(self.slot, self.spp, len(self.seeds), self.first)
         return light_sample(pixel, s, n, self.seeds, depth, light, max_depth, which=k)
-
-    def light_samples(self, n: int, depth, light: int, max_depth: int) -> list:
-        """The light samples a ray's sample draws: one per seed where every lane carries
-        all of the render's seeds (``shared``), else the one of the lane's own seed."""
-        if not self.shared:
-            return [self.light_sample(n, depth, light, max_depth)]
-        pixel, s = self.pixel_and_sample()
-        return [light_sample(pixel, s, n, sd, depth, light, max_depth) for sd in self.seeds]
 
     def sums(self) -> int:
         """How many sums of light each lane keeps: one per seed with ``shared``, else one."""
@@ -522,6 +518,12 @@ class Integrator:
                     # a lane cast their shadow rays to one light together.
                     samples = [list(self._light_samples(b, depth)) for b in bs]
                     for j in range(len(samples[0])):
+                        if samples[0][j][2] == SEED_LOOP:   # one ray a lane, S seeds
+                            light = samples[0][j][0]
+                            direct, cast = self._seed_loop(bs[0], points[0], light, depth)
+                            adds[0] = [a + d for a, d in zip(adds[0], direct, strict=True)]
+                            masks[0].append(cast)
+                            continue
                         rays, rest = [], []
                         for b, point, sample in zip(bs, points, samples, strict=True):
                             light, u, _ = sample[j]
@@ -549,12 +551,14 @@ class Integrator:
                 return (tuple(tuple(a) for a in adds), tuple(tuple(m) for m in masks),
                         kids or None)
 
-            n_rays = (sum(1 if light.delta else S for light in self.illuminating)
-                      if self.materials.has_smooth else 0)   # shadow rays a hit casts
+            # Per batch, the shadow rays' entries of shade()'s masks: a mask per shadow
+            # ray, or a count per seed loop.
+            casts = ([jit.Bool if light.delta or S == 1 else jit.UInt32
+                      for light in self.illuminating] if self.materials.has_smooth else [])
 
             def unlit(m):  # the outputs of shade() where nothing is shaded
                 return (tuple(tuple(dr.zeros(jit.Array3f, m) for _ in range(S)) for _ in bs),
-                        tuple(tuple(dr.zeros(jit.Bool, m) for _ in range(n_rays)) for _ in bs))
+                        tuple(tuple(dr.zeros(t, m) for t in casts) for _ in bs))
 
             b = bs[0]
             if per_ray:
@@ -680,20 +684,53 @@ class Integrator:
         return (origin, d_shadow, tmax, active), b.weight * f * e * cos
 
     def _light_samples(self, b: _Batch, depth):
-        """(light, sample, which sum) for each shadow ray a hit casts, in the lights'
-        order: a light no seed changes (a delta light) once, with which = -1 (its light
-        goes to every sum); a sampled light once per seed the lane carries, with that
-        seed's sample and sum (-1 where the lane carries one)."""
+        """(light, sample, which sum) for each light's shadow rays, in the lights' order:
+        a light no seed changes (a delta light), with which = -1 (its light goes to every
+        sum); a sampled light with its sample and -1 where the lane carries one seed,
+        else with no sample and :data:`SEED_LOOP` (:meth:`_seed_loop` casts one shadow
+        ray per seed)."""
         film = self.scene.film
         for light in self.illuminating:
             if light.delta:
                 yield light, None, -1
-                continue
-            us = b.light_samples(film.strata, depth, light.index, film.max_depth)
-            if len(us) == 1:
-                yield light, us[0], -1
+            elif b.sums() > 1:
+                yield light, None, SEED_LOOP
             else:
-                yield from ((light, u, k) for k, u in enumerate(us))
+                yield light, b.light_sample(film.strata, depth, light.index, film.max_depth), -1
+
+    def _seed_loop(self, b: _Batch, point, light, depth) -> tuple[list, object]:
+        """A lane that carries S seeds (shared ray trees): the shadow rays of a sampled
+        light, one seed a pass of a symbolic loop, each with that seed's sample.
+
+        Returns (the light each seed's sum gains, the shadow rays cast a lane). The light
+        of seed k is kept in local memory at 3k..3k+2 (k is the same in every lane, so
+        Dr.Jit reads and writes it as one vector) and added to sum k afterwards: the
+        same operations, in the same order, as with the seed's sample written into the
+        kernel once per seed, so each sum stays bit for bit the render of its seed
+        (``tests/tracer/test_schedules.py``). Written out per seed, a kernel held S
+        shadow-ray tests of every light: the report's pooled renders of 16 seeds were
+        its largest kernels (about 11,000-15,000 operations, 1.3-1.7 s of LLVM each on
+        an AVX2 CPU; ``python benchmarks/bench_seeds.py`` prints both ways).
+        """
+        film = self.scene.film
+        S, n = b.sums(), b.size()
+        pixel, s = b.pixel_and_sample()
+        light_of = dr.alloc_local(jit.Float, 3 * S, jit.Float(0))
+
+        def body(k, cast, light_of):
+            u = light_sample(pixel, s, film.strata, b.seeds, depth, light.index,
+                             film.max_depth, which=k)
+            ray, unblocked = self._shadow_ray(b, point, light, u)
+            blocked, = self.geo.occluded_group([ray])
+            direct = dr.select(ray[3] & ~blocked, unblocked, 0)
+            for c in range(3):
+                light_of[k * 3 + c] = direct[c]
+            return k + 1, cast + dr.select(ray[3], jit.UInt32(1), jit.UInt32(0)), light_of
+
+        _, cast, light_of = dr.while_loop(
+            (dr.zeros(jit.UInt32, n), dr.zeros(jit.UInt32, n), light_of),
+            lambda k, cast, light_of: k < S, body, labels=("k", "cast", "light_of"))
+        return [jit.Array3f(*(light_of[3 * k + c] for c in range(3))) for k in range(S)], cast
 
     def _render_stack(self, b: _Batch) -> tuple[object, object]:
         """A chunk's radiance per sample (a tuple: one per seed a lane carries) and its
@@ -754,8 +791,8 @@ class Integrator:
             base = (depth - 1) * 3
             sig = dr.select(dr.max(w) > SIGNIFICANT_WEIGHT, one, zero)
             shadows = zero
-            for m in masks:
-                shadows = shadows + dr.select(m, one, zero)
+            for m in masks:   # a mask per shadow ray, or a seed loop's count
+                shadows = shadows + (m if isinstance(m, jit.UInt32) else dr.select(m, one, zero))
             for k, v in enumerate((one, sig, shadows)):
                 counts.write(counts.read(base + k, alive) + v, base + k, alive)
             # The first child kept goes on; the others wait on the stack.
