@@ -4,9 +4,11 @@ in the render.
 A lane's K rays walk a mesh's BVH as a packet (tracer/integrator.py's GROUPS); a larger
 K reads each node once for more rays but makes a larger kernel. This writes `bench_speed.py
 process`'s two scenes (the instanced 160,000-triangle torus, the 1,000,000-triangle knot
-placed twice) and, for each K, runs a fresh process with an empty Dr.Jit kernel cache:
-the seconds LLVM spent on the first render's kernels (Dr.Jit's kernel history), then the
-median of warm renders in that process. The Ks run alternating, round after round.
+placed twice) and `bench_mesh.py`'s (one 1,000,000-triangle knot, placed once, filling
+the frame), takes the built-in mesh scenes (scenes/mesh_*.toml), all at 640x480, 16 spp,
+and, for each K, runs a fresh process with an empty Dr.Jit kernel cache: the seconds LLVM
+spent on the first render's kernels (Dr.Jit's kernel history), then the median of warm
+renders in that process. The Ks run alternating, round after round.
 
     python benchmarks/bench_group.py [--repeat 3] [--groups 1 2 4 8] [--renders 5]
 """
@@ -37,7 +39,8 @@ from whitted.tracer import backend, load_scene
 from whitted.tracer.integrator import Integrator
 import drjit as dr
 dr.set_flag(dr.JitFlag.KernelHistory, True)
-integ = Integrator(load_scene(sys.argv[1]), group=int(sys.argv[2]))
+integ = Integrator(load_scene(sys.argv[1]).with_overrides(size=(640, 480), spp=16),
+                   group=int(sys.argv[2]))
 dr.kernel_history()
 integ.render()
 llvm = sum(k["backend_time"] for k in dr.kernel_history()
@@ -49,6 +52,21 @@ for _ in range(int(sys.argv[3])):
     warm.append(time.perf_counter() - t)
 print(json.dumps([llvm, warm, backend.llvm_vector_width()]))
 """
+
+
+def _scenes(folder: Path) -> list[Path]:
+    """`bench_speed.py process`'s two scenes, `bench_mesh.py`'s, and the built-in mesh
+    scenes."""
+    sys.path.insert(0, str(ROOT / "scenes" / "meshes"))
+    from bench_mesh import SCENE
+    from generate import torus_knot, write_ply
+
+    scenes = write_process_scenes(folder, 160_000, 1_000_000, (640, 480), 16)
+    v, f = torus_knot(5000, 100)   # bench_mesh.py --triangles 1000000
+    write_ply(folder / "mesh_bench_knot.ply", v, f)
+    one = folder / "one_knot.toml"
+    one.write_text(SCENE.format(w=640, h=480, spp=16, mesh=folder / "mesh_bench_knot.ply"))
+    return [*scenes, one, *sorted((ROOT / "scenes").glob("mesh_*.toml"))]
 
 
 def main(argv=None) -> int:
@@ -67,7 +85,7 @@ def main(argv=None) -> int:
           f"packets {backend.llvm_vector_width()} lanes, the tracer's K here "
           f"{default_group()}; commit {commit()}; {machine_note()}", flush=True)
     with tempfile.TemporaryDirectory() as tmp:
-        for scene in write_process_scenes(Path(tmp), 160_000, 1_000_000, (640, 480), 16):
+        for scene in _scenes(Path(tmp)):
             subprocess.run([sys.executable, "-c", CHILD, str(scene), "1", "0"], check=True,
                            capture_output=True)   # the scene's mesh and tree caches filled
             llvm = {k: [] for k in args.groups}

@@ -145,16 +145,20 @@ SEEDS_PER_LANE_SAMPLE = 4
 #: larger K also means a larger kernel, which costs LLVM more time to compile the more it
 #: spills: AVX-512 has 32 vector registers, AVX2 16.
 #: ``python benchmarks/bench_group.py`` prints, for each K, a fresh process's compile
-#: seconds and the warm render of ``bench_speed.py process``'s two scenes:
+#: seconds and the warm render of five mesh scenes (``bench_speed.py process``'s two,
+#: ``bench_mesh.py``'s, scenes/mesh_*.toml; 640x480, 16 spp):
 #:
 #: - 16 lanes (AVX-512): the render of ``benchmarks/bench_mesh.py``'s scene (144,000
 #:   triangles, 640x480, 16 spp; a throwaway script of an earlier round, medians of 7):
 #:   K = 1 249 ms, 2 190-197 ms, 4 177-185 ms, 8 186-188 ms. K = 4.
-#: - 8 lanes (AVX2, an AMD EPYC of the Zen 3 family, ``bench_group.py``): LLVM's seconds
-#:   for K = 1, 2, 4, 8: 0.6, 1.0, 2.3, 6.3; the warm render of the torus 1.31, 0.92, 0.89,
-#:   0.77 s, of the knot 0.72, 0.56, 0.68, 0.58 s. K = 2: K = 4 compiles 1.3 s longer for
-#:   a torus 3 % faster and a knot 20 % slower; K = 8 compiles 5.3 s longer for a torus
-#:   0.14 s faster and a knot no faster.
+#: - 8 lanes (AVX2, an AMD EPYC of the Zen 3 family): K = 4 took LLVM 0.6-2.5 s longer
+#:   than K = 2 on every scene (about twice as long); warm, it rendered four of the five
+#:   3-20 % faster and the instanced knot 11 % slower (K = 1 and 8 on the two process
+#:   scenes: 0.6 and 6.3 s of LLVM). K = 2: a render whose kernel is not yet cached (a
+#:   first run, the case of a whole process on a fresh machine) saves more than a warm one
+#:   loses.
+#:   ``bench_speed.py mesh``'s render of one knot against Embree is then 1.74x on that
+#:   machine (1.38x with K = 4).
 GROUPS = {16: 4, 8: 2}
 
 #: K where Dr.Jit's packets have another width (4 lanes: SSE, NEON; not measured) or the
