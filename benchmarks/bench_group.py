@@ -27,7 +27,13 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
-from bench_speed import commit, compile_bytecode, machine_note, write_process_scenes  # noqa: E402
+from bench_speed import (  # noqa: E402
+    _LLVM_SECONDS,
+    commit,
+    compile_bytecode,
+    machine_note,
+    write_process_scenes,
+)
 
 #: A fresh process (empty kernel cache): the LLVM seconds of its first render with K rays a
 #: lane, then its warm renders' seconds.
@@ -38,19 +44,17 @@ keep_freed_memory()
 from whitted.tracer import backend, load_scene
 from whitted.tracer.integrator import Integrator
 import drjit as dr
-dr.set_flag(dr.JitFlag.KernelHistory, True)
-integ = Integrator(load_scene(sys.argv[1]).with_overrides(size=(640, 480), spp=16),
-                   group=int(sys.argv[2]))
-dr.kernel_history()
+""" + _LLVM_SECONDS + """scene = load_scene(sys.argv[1]).with_overrides(size=(640, 480), spp=16)
+integ = Integrator(scene, group=int(sys.argv[2]))
+llvm()
 integ.render()
-llvm = sum(k["backend_time"] for k in dr.kernel_history()
-           if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
+compiled = llvm()
 warm = []
 for _ in range(int(sys.argv[3])):
     t = time.perf_counter()
     integ.render()
     warm.append(time.perf_counter() - t)
-print(json.dumps([llvm, warm, backend.llvm_vector_width()]))
+print(json.dumps([compiled, warm, backend.llvm_vector_width()]))
 """
 
 

@@ -28,6 +28,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "benchmarks"))
 
 from bench_speed import (  # noqa: E402
+    _LLVM_SECONDS,
     _baseline_tree,
     _import_root,
     commit,
@@ -46,19 +47,17 @@ from whitted.reference.report.build import quick_overrides
 from whitted.tracer import load_scene
 from whitted.tracer.integrator import Integrator
 import drjit as dr
-dr.set_flag(dr.JitFlag.KernelHistory, True)
-integ = Integrator(quick_overrides(load_scene(sys.argv[1])))
+""" + _LLVM_SECONDS + """integ = Integrator(quick_overrides(load_scene(sys.argv[1])))
 seeds = list(range(int(sys.argv[2])))
-dr.kernel_history()
+llvm()
 integ.render_seeds(seeds, moments=True)
-llvm = sum(k["backend_time"] for k in dr.kernel_history()
-           if k["type"] == dr.KernelType.JIT and not k["cache_hit"]) / 1000
+compiled = llvm()
 warm = []
 for _ in range(int(sys.argv[3])):
     t = time.perf_counter()
     integ.render_seeds(seeds, moments=True)
     warm.append(time.perf_counter() - t)
-print(json.dumps([llvm, warm]))
+print(json.dumps([compiled, warm]))
 """
 
 

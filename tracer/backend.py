@@ -12,6 +12,7 @@ CUDA when a GPU driver answers and LLVM otherwise.
 from __future__ import annotations
 
 import ctypes
+import functools
 import importlib
 import os
 from types import ModuleType
@@ -101,13 +102,15 @@ def new_scope() -> None:
     dr.detail.new_scope(dr.JitBackend.CUDA if name() == "cuda" else dr.JitBackend.LLVM)
 
 
+@functools.cache
 def llvm_vector_width() -> int | None:
     """Lanes of the LLVM backend's SIMD packets on this CPU (16 with AVX-512, 8 with
     AVX/AVX2, 4 with SSE or NEON), or None where it cannot be asked.
 
     Dr.Jit 1.5's Python API does not expose it; libdrjit-core exports
     ``jit_llvm_vector_width()`` (a C++ function, so its name is mangled), read here
-    through ctypes after the backend's first array has started the LLVM backend.
+    through ctypes after the backend's first array has started the LLVM backend. The
+    width is the process's (the backend cannot change), so it is asked once.
     """
     import drjit as dr
 

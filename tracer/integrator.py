@@ -166,6 +166,12 @@ GROUPS = {16: 4, 8: 2}
 GROUP_ELSEWHERE = 2
 
 
+def _loops_seeds(light, b) -> bool:
+    """Whether ``light``'s shadow rays from batch ``b`` are cast in a loop over the seeds
+    (:meth:`Integrator._seed_loop`): a sampled light, from lanes that carry several."""
+    return not light.delta and b.sums() > 1
+
+
 def default_group() -> int:
     """K for a scene with a mesh on this machine's LLVM backend (:data:`GROUPS`)."""
     return GROUPS.get(backend.llvm_vector_width(), GROUP_ELSEWHERE)
@@ -557,7 +563,7 @@ class Integrator:
 
             # Per batch, the shadow rays' entries of shade()'s masks: a mask per shadow
             # ray, or a count per seed loop.
-            casts = ([jit.Bool if light.delta or S == 1 else jit.UInt32
+            casts = ([jit.UInt32 if _loops_seeds(light, bs[0]) else jit.Bool
                       for light in self.illuminating] if self.materials.has_smooth else [])
 
             def unlit(m):  # the outputs of shade() where nothing is shaded
@@ -697,7 +703,7 @@ class Integrator:
         for light in self.illuminating:
             if light.delta:
                 yield light, None, -1
-            elif b.sums() > 1:
+            elif _loops_seeds(light, b):
                 yield light, None, SEED_LOOP
             else:
                 yield light, b.light_sample(film.strata, depth, light.index, film.max_depth), -1
