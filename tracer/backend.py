@@ -241,14 +241,17 @@ def upload(array_type, values, dtype):
     """
     import numpy as np
 
-    a = np.asarray(values, dtype=dtype).reshape(-1)
-    if a.flags.c_contiguous and a.ctypes.data % ALIGNMENT == 0:
-        return array_type(a)
-    pad = ALIGNMENT // a.itemsize
-    buf = np.empty(a.size + pad, dtype=a.dtype)
-    start = (-buf.ctypes.data % ALIGNMENT) // a.itemsize
-    view = buf[start:start + a.size]
-    view[...] = a
+    src = np.asarray(values)
+    dtype = np.dtype(dtype)
+    if src.dtype == dtype and src.flags.c_contiguous and src.ctypes.data % ALIGNMENT == 0:
+        return array_type(src.reshape(-1))
+    # Converted and placed in one pass (a column of an (N, 3) array, int64 indices made
+    # uint32), rather than a converted copy and then an aligned copy of that.
+    pad = ALIGNMENT // dtype.itemsize
+    buf = np.empty(src.size + pad, dtype=dtype)
+    start = (-buf.ctypes.data % ALIGNMENT) // dtype.itemsize
+    view = buf[start:start + src.size]
+    np.copyto(view.reshape(src.shape), src, casting="unsafe")
     return array_type(view)
 
 

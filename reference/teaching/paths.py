@@ -100,7 +100,7 @@ def ray_trees(scene, pixels: list[tuple[int, int]]) -> list[Tree]:
     rays = [(np.asarray(o)[:, i].astype(np.float64), np.asarray(d)[:, i].astype(np.float64),
              float(np.asarray(tmax)[i]), np.ones(3), "", i, "camera") for i in range(len(pixels))]
     scale = _scene_scale(scene)
-    emits = np.asarray(geo.radiance).T.max(axis=1) > 0
+    emits = geo.emitting()
     for depth in range(1, scene.film.max_depth + 1):
         if not rays:
             break
@@ -454,7 +454,7 @@ def example_paths(scene, exprs=("LDDE", "LSDE"), candidates: int = 400,
     materials = SceneMaterials(list(scene.materials.values()))
     lights = [e for e in scene_emitters(scene.lights, geo.emitters, scene.shape_lights())
               if e.illuminates]
-    emits = np.asarray(geo.radiance).T.max(axis=1) > 0
+    emits = geo.emitting()
     W, H = scene.film.width, scene.film.height
     step = max(1, int(math.sqrt(W * H / candidates)))
     px = np.array([(x, y) for y in range(step // 2, H, step) for x in range(step // 2, W, step)])

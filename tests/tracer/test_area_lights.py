@@ -7,6 +7,7 @@ two-sided false-alarm rate under the normal approximation).
 
 import math
 
+import drjit as dr
 import numpy as np
 import pytest
 
@@ -152,3 +153,26 @@ def test_flat_area_light_never_shadows_its_own_sample_at_grazing_angles(jit):
     # would have met the light itself for a good part of the points.
     along = np.asarray(geo.occluded(origin, wi, dist * (1 - SHADOW_EPSILON)))
     assert along[clear].mean() > 0.2
+
+
+@pytest.mark.parametrize("name", ["area_lights", "shape_lights", "three_lights", "mesh_knot"])
+def test_the_geometry_says_which_primitives_emit(jit, name):
+    """Geometry.emitting(): the primitives of the shapes that carry an area emitter, and
+    no others. A geometry with none keeps one zero radiance rather than a row a
+    primitive (issue 33: the 1,000,000-triangle knot placed twice made 3,000,000 rows of
+    zeros), and its answer still has a row a primitive."""
+    from conftest import SCENES
+
+    from whitted.tracer.geometry import Geometry
+    from whitted.tracer.scene import load_scene
+
+    scene = load_scene(SCENES / f"{name}.toml")
+    geo = Geometry(scene)
+    emits = geo.emitting()
+    assert emits.shape == (max(geo.count, 1),)
+    emitting = [s for s in scene.shapes if getattr(s, "emitter", None) is not None]
+    assert emits.sum() == sum(s.primitive_count() for s in emitting)
+    if emitting:
+        assert dr.width(geo.radiance) == geo.count
+    else:
+        assert dr.width(geo.radiance) == 1

@@ -689,3 +689,29 @@ def test_a_build_reads_within_its_arrays(jit, capfd):
     finally:
         dr.set_flag(dr.JitFlag.Debug, False)
     assert "out-of-bounds" not in capfd.readouterr().err
+
+
+def test_packed_boxes_are_the_plain_rounding_of_the_padded_boxes_bit_for_bit():
+    """pack_nodes' float32 boxes (bvh._outward, written column by column and stepping
+    outwards only where rounding went inwards, issue 33) are, number for number, what
+    the plain formula gives: pad by 2^-20 of the box's largest coordinate (and 1e-30),
+    round to the nearest float32, step one float32 outwards where that lies inside the
+    unpadded box; and they hold the float64 boxes."""
+    from whitted.tracer.bvh import _outward
+
+    rng = np.random.default_rng(8)
+    for scale in (1e-38, 1e-30, 1e-3, 1.0, 1e6, 1e30):
+        lo = rng.normal(size=(4000, 3)) * scale
+        hi = lo + np.abs(rng.normal(size=(4000, 3))) * scale
+        lo[::7], hi[::11] = 0.0, 0.0                     # zeros, and float32 values
+        lo[::13], hi[::17] = np.float32(1.5) * scale, np.float32(2.5) * scale
+        hi = np.maximum(hi, lo)
+        pad = np.maximum(np.abs(lo), np.abs(hi)).max(axis=1, keepdims=True) * 2.0**-20 + 1e-30
+        want_lo, want_hi = (lo - pad).astype(np.float32), (hi + pad).astype(np.float32)
+        want_lo = np.where(want_lo > lo, np.nextafter(want_lo, np.float32(-np.inf)), want_lo)
+        want_hi = np.where(want_hi < hi, np.nextafter(want_hi, np.float32(np.inf)), want_hi)
+        got_lo, got_hi = _outward(lo, hi)
+        assert got_lo.dtype == got_hi.dtype == np.float32
+        np.testing.assert_array_equal(got_lo, want_lo)
+        np.testing.assert_array_equal(got_hi, want_hi)
+        assert (got_lo <= lo).all() and (got_hi >= hi).all()

@@ -349,3 +349,52 @@ def test_prune_keeps_the_cache_under_its_bound_dropping_the_least_recently_used(
         os.utime(folder / f"{k}.arrays", ns=(k * 10**9, k * 10**9))
     cache.prune(folder, 250, keep=folder / "0.arrays")
     assert sorted(p.name for p in folder.iterdir()) == ["0.arrays", "3.arrays"]
+
+
+# ------------------------------------------------------------------ placed meshes
+
+
+def test_a_placed_mesh_keys_its_normals_and_tree_by_its_file_and_its_placement(
+        home, tmp_path, monkeypatch):
+    """A mesh file kept parsed on disk carries that entry's key (MeshData.key); a placed
+    mesh's key (shapes.mesh._placed_key) hashes it with to_world, and keys its vertex
+    normals and its tree instead of a hash of the arrays (issue 33). Two placements of
+    one file under different non-uniform scales have other vertices and other normals:
+    read back from the disk, each still gets its own, and a new file its own key."""
+    from whitted.tracer import load_scene
+    from whitted.tracer.shapes import mesh
+
+    rng = np.random.default_rng(4)
+    v = rng.normal(size=(60, 3))
+    v /= np.linalg.norm(v, axis=1, keepdims=True)            # points on a sphere
+    f = np.array([[0, i, i + 1] for i in range(1, 59)] + [[5, 17, 40], [3, 9, 33]])
+    meshio.write_ply(tmp_path / "blob.ply", v, f)
+    (tmp_path / "s.toml").write_text(
+        "[camera]\norigin = [0, 0, 5]\ntarget = [0, 0, 0]\nfov = 40\n"
+        "[materials.m]\ntype = \"diffuse\"\nreflectance = 0.5\n"
+        + "".join(f"[[shapes]]\ntype = \"mesh\"\nfile = \"blob.ply\"\nmaterial = \"m\"\n"
+                  f"to_world = [ {{ scale = {s} }} ]\n"
+                  for s in ("[1, 1, 3]", "[3, 1, 1]")))
+
+    def meshes():
+        meshio.clear_cache()
+        return [s for s in load_scene(tmp_path / "s.toml").shapes if isinstance(s, mesh.Mesh)]
+
+    first = meshes()
+    assert first[0].key and first[1].key and first[0].key != first[1].key
+    assert meshio.load_mesh(tmp_path / "blob.ply").key is not None
+    with monkeypatch.context() as mp:     # from the disk, keyed by file and placement
+        mp.setattr(meshio, "compute_vertex_normals", lambda *a: pytest.fail("computed"))
+        again = meshes()
+    for a, b in zip(first, again, strict=True):
+        assert a.key == b.key
+        want = meshio.compute_vertex_normals(b.vertices, b.faces)
+        want /= np.maximum(np.linalg.norm(want, axis=1, keepdims=True), 1e-30)
+        np.testing.assert_array_equal(b.normals, want)
+    assert not np.allclose(again[0].normals, again[1].normals)
+    # the tree of each placement is its own (a mesh's block keys it by mesh.key)
+    trees = [mesh.Block(m).bvh for m in again]
+    assert trees[0] is not trees[1]
+    # another file: another key
+    meshio.write_ply(tmp_path / "blob.ply", v * 2.0, f)
+    assert meshes()[0].key != first[0].key

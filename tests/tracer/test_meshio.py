@@ -20,6 +20,7 @@ from whitted.tracer.meshio import (
     compute_vertex_normals,
     face_normals,
     load_mesh,
+    row_lengths,
 )
 
 #: Mitsuba stores positions, normals and uvs in float32 and computes its normals in
@@ -1090,3 +1091,15 @@ def test_written_ply_refuses_faces_out_of_range(tmp_path):
 
     with pytest.raises(ValueError, match="out of range"):
         write_mesh(tmp_path / "w.ply", np.zeros((3, 3)), [[0, 1, 3]])
+
+
+def test_row_lengths_are_numpys_norm_bit_for_bit():
+    """meshio.row_lengths (column by column, issue 33) gives np.linalg.norm(a, axis=1)
+    to the last bit, from lengths that underflow when squared to ones that overflow."""
+    rng = np.random.default_rng(3)
+    for scale in (1e-200, 1e-20, 1.0, 1e20, 1e160):
+        a = rng.normal(size=(20000, 3)) * scale
+        a[::5] *= rng.uniform(1e-8, 1e8, size=(4000, 1))
+        a[::9, 1] = 0.0
+        with np.errstate(over="ignore", under="ignore"):
+            np.testing.assert_array_equal(row_lengths(a), np.linalg.norm(a, axis=1))

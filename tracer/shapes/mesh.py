@@ -40,6 +40,9 @@ class Mesh(base.ShapeModel):
     material: str | None
     emitter: Any = None   # an AreaEmitter (tracer.emitters.area) or None
     placement: base.Placement | None = base.placement_field()
+    # A hash of what vertices and faces are made from (the parsed file's key and
+    # to_world), or None: the key of their cached normals and tree (_placed_key).
+    key: str | None = None
 
     def primitive_count(self) -> int:
         return len(self.faces)
@@ -49,7 +52,7 @@ MODEL = Mesh
 
 
 def parse(t: Table, ctx: base.Context) -> Mesh:
-    from whitted.tracer.meshio import MeshError, load_mesh, vertex_normals
+    from whitted.tracer.meshio import MeshError, load_mesh, row_lengths, vertex_normals
 
     m = ctx.to_world()
     name = t.string("file")
@@ -63,16 +66,29 @@ def parse(t: Table, ctx: base.Context) -> Mesh:
         t.fail("file", str(e))
     verts = tf.apply_point(m, data.vertices)
     check_extent(t, "file", verts, "vertices")
+    key = _placed_key(data.key, m)
     normals = None
     if smooth:
         if data.normals is not None:  # normals transform by the inverse transpose
             normals = (data.normals @ m[:3, :3].T if faults.on("normals-by-matrix")
                        else tf.apply_normal(m, data.normals))
         else:  # as Mitsuba does: from the faces, after to_world
-            normals = vertex_normals(verts, data.faces)
-        normals = normals / np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-30)
+            normals = vertex_normals(verts, data.faces, key)
+        normals = normals / np.maximum(row_lengths(normals), 1e-30)[:, None]
     return Mesh(str(path), smooth, verts, np.asarray(data.faces), normals, data.uvs,
-                as_tuple(m), ctx.material, ctx.emitter, ctx.placement())
+                as_tuple(m), ctx.material, ctx.emitter, ctx.placement(), key)
+
+
+def _placed_key(file_key: str | None, m: np.ndarray) -> str | None:
+    """A hash of what a mesh's world-space vertices and faces are made from: the parsed
+    file (its :attr:`tracer.meshio.MeshData.key`, None for a file not kept on disk, and
+    then None), ``to_world`` and the code that applies it."""
+    if file_key is None:
+        return None
+    from whitted.tracer.cache import content_key, source_digest
+
+    return content_key("placed", file_key, np.ascontiguousarray(m, dtype=np.float64),
+                       source_digest(tf.__file__))
 
 
 def bounds(shape) -> tuple[np.ndarray, np.ndarray]:
@@ -107,11 +123,13 @@ def _face_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
     temporaries (np.cross makes several) are small and reused, rather than a few
     arrays of the mesh's size in fresh memory each (issue 33: the knot's normals, on
     a thread beside its tree's checks, were three times as long as alone)."""
+    from whitted.tracer.meshio import row_lengths
+
     n = np.empty_like(p0, dtype=np.float64)
     for s in range(0, len(p0), FACE_NORMALS_BLOCK):
         b = slice(s, s + FACE_NORMALS_BLOCK)
         c = np.cross(p1[b] - p0[b], p2[b] - p0[b])
-        c /= np.maximum(np.linalg.norm(c, axis=1, keepdims=True), 1e-30)
+        c /= np.maximum(row_lengths(c), 1e-30)[:, None]
         n[b] = c
     return n
 
@@ -129,20 +147,21 @@ def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
     return content_key(v, f)
 
 
-def _tree_beside_normals(v: np.ndarray, f: np.ndarray) -> tuple:
+def _tree_beside_normals(v: np.ndarray, f: np.ndarray, key: str | None) -> tuple:
     """(:func:`tracer.bvh.shared_bvh`, :func:`_face_normals`) of the mesh's triangles, with
-    work on a second core: the tree's key hashed while the corners are gathered, then
-    the normals computed while the tree is read, checked and packed (hashing and
-    numpy's loops let go of Python's lock)."""
+    work on a second core: the tree's key (unless given) hashed while the corners are
+    gathered, then the normals computed while the tree is read, checked and packed
+    (hashing and numpy's loops let go of Python's lock)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from whitted.tracer.bvh import shared_bvh
 
     with ThreadPoolExecutor(max_workers=1) as pool:
-        key = pool.submit(_tree_key, v, f)
+        hashed = pool.submit(_tree_key, v, f) if key is None else None
         p0, p1, p2 = _corners(v, f)
         normals = pool.submit(_face_normals, p0, p1, p2)
-        return shared_bvh(p0, p1, p2, key=key.result()), normals.result()
+        key = hashed.result() if hashed is not None else key
+        return shared_bvh(p0, p1, p2, key=key), normals.result()
 
 
 class Block(base.Block):
@@ -155,10 +174,10 @@ class Block(base.Block):
         self.count = len(f)
         if self.count < PARALLEL_NORMALS_FROM:
             p0, p1, p2 = _corners(v, f)
-            self.bvh = shared_bvh(p0, p1, p2, key=_tree_key(v, f))
+            self.bvh = shared_bvh(p0, p1, p2, key=mesh.key or _tree_key(v, f))
             n = _face_normals(p0, p1, p2)
         else:
-            self.bvh, n = _tree_beside_normals(v, f)
+            self.bvh, n = _tree_beside_normals(v, f, mesh.key)
         self.face_n = base.v3(n)
         self.faces = base.uints(f.reshape(-1))
         self.p = base.v3(v)
