@@ -104,10 +104,11 @@ def pack(members: list, packing) -> list:
     return out
 
 
-#: Meshes of this many triangles or more hash their tree's key and compute their face
-#: normals beside the rest, on a thread of their own (:class:`Block`). The
-#: 1,000,000-triangle knot of ``bench_speed.py process``: normals about 40-70 ms and the key
-#: 20-40 ms, hidden behind the corners' gathering and the tree's checks.
+#: Meshes of this many triangles or more hash their tree's key (where the mesh has none,
+#: :attr:`Mesh.key`) and compute their face normals beside the rest, on a thread of their
+#: own (:class:`Block`). The 1,000,000-triangle knot of ``bench_speed.py process``:
+#: normals about 40-70 ms and the key 20-40 ms, hidden behind the corners' gathering and
+#: the tree's checks.
 PARALLEL_NORMALS_FROM = 1 << 15
 
 
@@ -140,8 +141,8 @@ def _corners(v: np.ndarray, f: np.ndarray) -> list:
 
 
 def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
-    """The key of the mesh's tree (:func:`tracer.bvh.shared_bvh`): a hash of its vertices
-    and faces, which give its corners, and half their bytes."""
+    """The key of the tree of a mesh without :attr:`Mesh.key` (:func:`tracer.bvh.shared_bvh`):
+    a hash of its vertices and faces, which give its corners, and half their bytes."""
     from whitted.tracer.cache import content_key
 
     return content_key(v, f)
