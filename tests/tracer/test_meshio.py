@@ -614,23 +614,46 @@ def per_corner(normals, faces):
     return normals[faces].reshape(-1, 3)
 
 
-def test_face_normals_in_blocks_are_the_whole_meshs_bit_for_bit(monkeypatch):
-    # A mesh's face normals (shapes.mesh._face_normals) are computed in blocks; with
-    # blocks of 7 triangles, degenerate ones among them, they are the formula's over
-    # the whole arrays at once, bit for bit.
+def test_a_mesh_hits_face_normal_is_mitsubas_formula_bit_for_bit_and_survives_tiny_triangles(
+        jit):
+    # shapes.mesh.face_normal, computed where a hit is shaded: Mitsuba's mesh's
+    # normalize(cross(p1 - p0, p2 - p0)) in float32, bit for bit, for triangles of every
+    # size whose cross product float32 holds; within float32's rounding of the float64
+    # normal; for triangles so small that the plain formula's cross product underflows
+    # (1e-22 across), still the unit normal (the plain formula on the triangle scaled
+    # up by 2^70, exactly); 0 for a degenerate one.
+    import drjit as dr
+
     from whitted.tracer.shapes import mesh
 
     rng = np.random.default_rng(5)
-    p0, p1, p2 = (rng.normal(size=(200, 3)) for _ in range(3))
-    p1[[3, 50, 199]] = p0[[3, 50, 199]]                 # degenerate: two corners equal
-    p2[77] = p0[77] + 2.0 * (p1[77] - p0[77])           # degenerate: on a line
-    whole = np.cross(p1 - p0, p2 - p0)
-    whole /= np.maximum(np.linalg.norm(whole, axis=1, keepdims=True), 1e-30)
-    monkeypatch.setattr(mesh, "FACE_NORMALS_BLOCK", 7)
-    got = mesh._face_normals(p0, p1, p2)
-    assert got.dtype == np.float64
-    np.testing.assert_array_equal(got.view(np.uint64), whole.view(np.uint64))
-    assert not got[[3, 50, 199]].any()
+    n = 3000
+    p0, p1, p2 = (rng.normal(size=(n, 3)).astype(np.float32) for _ in range(3))
+    size = np.float32(10.0) ** rng.integers(-6, 6, size=(n, 1)).astype(np.float32)
+    p1, p2 = p0 + (p1 - p0) * size, p0 + (p2 - p0) * size
+    p1[[3, 50]] = p0[[3, 50]]                               # degenerate: two corners equal
+
+    def v3(a):
+        return jit.Array3f(*(np.ascontiguousarray(a[:, k]) for k in range(3)))
+
+    def got_of(q0, q1, q2):
+        return np.stack([c.numpy() for c in mesh.face_normal(v3(q0), v3(q1), v3(q2))], 1)
+
+    got = got_of(p0, p1, p2)
+    plain = np.stack([c.numpy() for c in dr.normalize(dr.cross(v3(p1) - v3(p0),
+                                                               v3(p2) - v3(p0)))], 1)
+    fine = np.ones(n, bool)
+    fine[[3, 50]] = False
+    np.testing.assert_array_equal(got[fine].view(np.uint32), plain[fine].view(np.uint32))
+    assert not got[[3, 50]].any()
+    c = np.cross((p1 - p0).astype(np.float64), (p2 - p0).astype(np.float64))[fine]
+    np.testing.assert_allclose(got[fine], c / np.linalg.norm(c, axis=1, keepdims=True),
+                               atol=4e-7)
+    tiny = [x * np.float32(2.0**-70) for x in (p0[:8], p1[:8], p2[:8])]
+    tiny_plain = np.stack([c.numpy() for c in dr.normalize(dr.cross(
+        v3(tiny[1]) - v3(tiny[0]), v3(tiny[2]) - v3(tiny[0])))], 1)
+    assert not np.isfinite(tiny_plain[fine[:8]]).all() or not tiny_plain[fine[:8]].any()
+    np.testing.assert_array_equal(got_of(*tiny)[fine[:8]], got[:8][fine[:8]])
 
 
 def test_vertex_normals_equal_mitsubas_for_an_obj_mesh(tmp_path, mi):

@@ -304,9 +304,12 @@ class LocalBlock(Block):
 
 
 def box_of(points) -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) of a set of points."""
+    """(lo, hi) of a set of points, column by column: numpy's ``min(axis=0)`` of an
+    (N, 3) array took 8.5 ms for the 500,000 vertices of the 1,000,000-triangle knot, a
+    column's ``min()`` 0.8 ms (the same numbers; issue 33)."""
     p = np.asarray(points, dtype=np.float64).reshape(-1, 3)
-    return p.min(axis=0), p.max(axis=0)
+    return (np.array([p[:, c].min() for c in range(3)]),
+            np.array([p[:, c].max() for c in range(3)]))
 
 
 def box_corners(m, lo, hi) -> tuple[np.ndarray, np.ndarray]:

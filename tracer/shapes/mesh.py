@@ -105,34 +105,9 @@ def pack(members: list, packing) -> list:
 
 
 #: Meshes of this many triangles or more hash their tree's key (where the mesh has none,
-#: :attr:`Mesh.key`) and compute their face normals beside the rest, on a thread of their
-#: own (:class:`Block`). The 1,000,000-triangle knot of ``bench_speed.py process``:
-#: normals about 40-70 ms and the key 20-40 ms, hidden behind the corners' gathering and
-#: the tree's checks.
-PARALLEL_NORMALS_FROM = 1 << 15
-
-
-#: Triangles a block of :func:`_face_normals` (its temporaries stay in a core's cache).
-FACE_NORMALS_BLOCK = 1 << 14
-
-
-def _face_normals(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray) -> np.ndarray:
-    """Unit normals of the triangles (their winding's), float64; 0 for a degenerate one.
-
-    Computed in blocks of :data:`FACE_NORMALS_BLOCK` triangles: a row's numbers depend on
-    that row alone, so the result is the whole arrays' bit for bit, while the
-    temporaries (np.cross makes several) are small and reused, rather than a few
-    arrays of the mesh's size in fresh memory each (issue 33: the knot's normals, on
-    a thread beside its tree's checks, were three times as long as alone)."""
-    from whitted.tracer.meshio import row_lengths
-
-    n = np.empty_like(p0, dtype=np.float64)
-    for s in range(0, len(p0), FACE_NORMALS_BLOCK):
-        b = slice(s, s + FACE_NORMALS_BLOCK)
-        c = np.cross(p1[b] - p0[b], p2[b] - p0[b])
-        c /= np.maximum(row_lengths(c), 1e-30)[:, None]
-        n[b] = c
-    return n
+#: :attr:`Mesh.key`) beside the corners' gathering, on a thread of their own
+#: (:class:`Block`; the 1,000,000-triangle knot's key about 20-40 ms).
+PARALLEL_KEY_FROM = 1 << 15
 
 
 def _corners(v: np.ndarray, f: np.ndarray) -> list:
@@ -148,38 +123,58 @@ def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
     return content_key(v, f)
 
 
-def _tree_beside_normals(v: np.ndarray, f: np.ndarray, key: str | None) -> tuple:
-    """(:func:`tracer.bvh.shared_bvh`, :func:`_face_normals`) of the mesh's triangles, with
-    work on a second core: the tree's key (unless given) hashed while the corners are
-    gathered, then the normals computed while the tree is read, checked and packed
-    (hashing and numpy's loops let go of Python's lock)."""
+def _tree(v: np.ndarray, f: np.ndarray, key: str | None):
+    """:func:`tracer.bvh.shared_bvh` of the mesh's triangles under ``key``, else under
+    :func:`_tree_key` (:func:`_tree_beside_key` for a large mesh)."""
+    from whitted.tracer.bvh import shared_bvh
+
+    if key is None and len(f) >= PARALLEL_KEY_FROM:
+        return _tree_beside_key(v, f)
+    return shared_bvh(*_corners(v, f), key=key or _tree_key(v, f))
+
+
+def _tree_beside_key(v: np.ndarray, f: np.ndarray):
+    """:func:`_tree` of a large mesh without a key: the key hashed on a second core while
+    the corners are gathered (hashing lets go of Python's lock)."""
     from concurrent.futures import ThreadPoolExecutor
 
     from whitted.tracer.bvh import shared_bvh
 
     with ThreadPoolExecutor(max_workers=1) as pool:
-        hashed = pool.submit(_tree_key, v, f) if key is None else None
-        p0, p1, p2 = _corners(v, f)
-        normals = pool.submit(_face_normals, p0, p1, p2)
-        key = hashed.result() if hashed is not None else key
-        return shared_bvh(p0, p1, p2, key=key), normals.result()
+        hashed = pool.submit(_tree_key, v, f)
+        corners = _corners(v, f)
+        return shared_bvh(*corners, key=hashed.result())
+
+
+def face_normal(p0, p1, p2):
+    """The unit normal of the triangles (p0, p1, p2) (jit.Array3f), their winding's:
+    normalize((p1 - p0) x (p2 - p0)), as Mitsuba's mesh computes its face normal
+    (``si.n = dr::normalize(dr::cross(dp0, dp1))``, src/render/mesh.cpp), in float32 from
+    the float32 corners; 0 for a degenerate triangle.
+
+    The edges are first scaled by the power of two that brings their largest component
+    to [1, 2): the same unit vector bit for bit, since a power of two scales every
+    number exactly, where the cross product of a tiny triangle's edges (below about
+    1e-19 in size) would otherwise underflow float32. Computed in the kernel where a hit
+    is shaded; the normals had been computed on the host in float64 for every triangle
+    and uploaded, 40 ms of the 1,000,000-triangle knot's every start (issue 33)."""
+    e1, e2 = p1 - p0, p2 - p0
+    m = dr.maximum(dr.max(dr.abs(e1)), dr.max(dr.abs(e2)))
+    # 2^-e for m = 1.x * 2^e: biased exponent 254 - E, from m's biased exponent E; for
+    # E = 0 (m subnormal, or zero), 2^127
+    bits = dr.reinterpret_array(jit.UInt32, m) & 0x7F800000
+    scale = dr.reinterpret_array(jit.Float, jit.UInt32(0x7F000000) - bits)
+    c = dr.cross(e1 * scale, e2 * scale)
+    return dr.select(dr.squared_norm(c) > 0, dr.normalize(c), 0)
 
 
 class Block(base.Block):
     """A triangle mesh behind a bounding-volume hierarchy (tracer/bvh.py)."""
 
     def __init__(self, mesh: Mesh):
-        from whitted.tracer.bvh import shared_bvh
-
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
-        if self.count < PARALLEL_NORMALS_FROM:
-            p0, p1, p2 = _corners(v, f)
-            self.bvh = shared_bvh(p0, p1, p2, key=mesh.key or _tree_key(v, f))
-            n = _face_normals(p0, p1, p2)
-        else:
-            self.bvh, n = _tree_beside_normals(v, f, mesh.key)
-        self.face_n = base.v3(n)
+        self.bvh = _tree(v, f, mesh.key)
         self.faces = base.uints(f.reshape(-1))
         self.p = base.v3(v)
         self.vn = None if mesh.normals is None else base.v3(mesh.normals)
@@ -215,7 +210,7 @@ class Block(base.Block):
         p1 = dr.gather(jit.Array3f, self.p, i1, mask)
         p2 = dr.gather(jit.Array3f, self.p, i2, mask)
         _, _, beta, gamma = tri_f.intersect(o, d, p0, p1, p2, dr.inf)
-        n = dr.gather(jit.Array3f, self.face_n, k, mask)
+        n = face_normal(p0, p1, p2)
         ns = n
         if self.vn is not None:  # barycentric interpolation of the vertex normals
             ns = tri_f.interpolate(
