@@ -103,7 +103,8 @@ class BVHArrays:
     left, right : (M,) int64 child node indices; -1 for a leaf.
     start, count : (M,) int64 a leaf's triangles, ``order[start:start + count]``;
         count is 0 for an inner node.
-    order : (N,) int64 original triangle indices, leaf after leaf.
+    order : (N,) int64 original triangle indices, leaf after leaf (int32 in a tree read
+        from the disk cache).
     depth : levels below the root (0 when the root is a leaf).
     seconds : wall-clock build time.
     """
@@ -1309,8 +1310,12 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, key: str | None =
 DISK_MIN_TRIANGLES = 1 << 15
 #: The disk cache's bound, all trees together; the least recently used go first.
 DISK_MAX_BYTES = 2 << 30
-_ARRAY_KINDS = {"lo": "<f4", "hi": "<f4", "left": "<i8", "right": "<i8", "start": "<i8",
-                "count": "<i8", "order": "<i8", "depth": "<i8"}
+#: What an entry holds: the boxes, each node's right child (-1 for a leaf), its count,
+#: ``order`` and the depth. A left child (the node after its parent) and a leaf's start
+#: (the counts before it) follow from the depth-first layout (:func:`_stored`), so they
+#: are neither stored nor read: the 1,000,000-triangle knot's entry is 22 MB, not 43.
+_ARRAY_KINDS = {"lo": "<f4", "hi": "<f4", "right": "<i4", "count": "|u1", "order": "<i4",
+                "depth": "<i8"}
 
 
 def disk_folder():
@@ -1332,78 +1337,88 @@ def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, corners: str) 
     entry = disk_folder() / f"{key}.arrays"
     t0 = time.perf_counter()
     a = cache.read_entry(entry, _ARRAY_KINDS)
-    if a is not None and a["depth"].shape == (1,):
-        arrays = BVHArrays(a["lo"], a["hi"], a["left"], a["right"], a["start"],
-                           a["count"], a["order"], int(a["depth"][0]),
-                           time.perf_counter() - t0)
-        if valid_arrays(arrays, p0, p1, p2):
-            cache.touch(entry)
-            return BVH(p0, p1, p2, arrays=arrays)
+    if a is not None and a["depth"].shape == (1,) and a["right"].shape == a["count"].shape:
+        arrays = _stored(a, time.perf_counter() - t0)
+        # valid_arrays' two steps, the boxes checked on the records the BVH reads
+        if _tree_holds(arrays, len(p0), (1 << COUNT_BITS) - 1):
+            bvh = BVH(p0, p1, p2, arrays=arrays)
+            if _boxes_hold(arrays, bvh.tris):
+                cache.touch(entry)
+                return bvh
     bvh = BVH(p0, p1, p2)
     b = bvh.arrays
-    cache.keep_entry(entry, {"lo": b.lo, "hi": b.hi, "left": b.left, "right": b.right,
-                             "start": b.start, "count": b.count, "order": b.order,
+    cache.keep_entry(entry, {"lo": b.lo, "hi": b.hi, "right": b.right.astype(np.int32),
+                             "count": b.count.astype(np.uint8),
+                             "order": b.order.astype(np.int32),
                              "depth": np.array([b.depth])}, DISK_MAX_BYTES)
     return bvh
 
 
-#: Trees of this many triangles or more check their boxes on a second thread while their
-#: structure is checked (:func:`valid_arrays`; numpy's loops let go of Python's lock). The
-#: 1,000,000-triangle knot: about 0.11 s alone (a throwaway script, after a first run).
-PARALLEL_CHECK_FROM = 1 << 15
+def _stored(a: dict, seconds: float) -> BVHArrays:
+    """The :class:`BVHArrays` of an entry's arrays (``_ARRAY_KINDS``, of one length each),
+    laid out depth-first as :func:`build_bvh` lays a tree out: an inner node's left child
+    is the node after it, a leaf's triangles start where the leaves before it end (an
+    inner node's start is 0). Not yet checked (:func:`_tree_holds`)."""
+    right = a["right"].astype(np.int64)
+    count = a["count"].astype(np.int64)
+    m = len(right)
+    inner = right >= 0
+    left = np.where(inner, np.arange(1, m + 1), -1)
+    start = np.cumsum(count)
+    start -= count
+    start[inner] = 0
+    return BVHArrays(a["lo"], a["hi"], left, right, start, count, a["order"],
+                     int(a["depth"][0]), seconds)
 
 
 def valid_arrays(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
                  max_leaf: int = (1 << COUNT_BITS) - 1) -> bool:
     """Whether ``b`` is a tree over these triangles that the traversal may walk: what a
-    tree read from disk must show before it is used.
+    tree read from disk must show before it is used (:func:`_tree_holds`, then
+    :func:`_boxes_hold` on the float32 records the traversal reads)."""
+    if not _tree_holds(b, len(p0), max_leaf):
+        return False
+    perm = upload(jit.UInt32, b.order, np.uint32)
+    return _boxes_hold(b, _triangle_records(perm, (p0, p1, p2)))
 
-    Shapes agree; node 0 is the root and every other node is the child of exactly one
-    inner node that comes before it (a tree, depth-first, so a walk ends); a leaf holds
-    1 to ``max_leaf`` triangles and the leaves' ranges tile ``order``, a permutation of
-    the triangles; ``depth`` is the tree's; every box is finite and holds its children's
-    boxes, a leaf's box its triangles' corners (so that no hit is missed). The boxes
-    (:func:`_boxes_hold`) and the rest (:func:`_tree_holds`) are checked side by side for
-    large trees; both must hold.
-    """
-    n, m = len(p0), len(b.left)
+
+def _tree_holds(b: BVHArrays, n: int, max_leaf: int) -> bool:
+    """Whether ``b`` is a tree of ``n`` triangles in :func:`build_bvh`'s layout, its boxes
+    finite: :func:`valid_arrays`' checks but the boxes' contents.
+
+    Shapes agree; nodes are in depth-first order, as the builders number them: a left
+    child right after its parent, the right one after it, each node but the root the
+    child of exactly one inner node (so a walk from the root ends, and meets every node
+    once); a leaf holds 1 to ``max_leaf`` triangles and the leaves' ranges follow each
+    other in node order from 0 to ``n``; ``order`` is a permutation of the triangles;
+    ``depth`` is the tree's. The layout is asked for because it makes the check cheap
+    (no sort of the leaves' ranges, no gather of a node's children): the
+    1,000,000-triangle knot's tree in 18 ms, where the layout-free check took 36 ms
+    (and 75 ms in a process's first check, beside the boxes' on a second thread; a
+    throwaway script, issue 33)."""
+    m = len(b.left)
     shapes = [(b.lo, (m, 3)), (b.hi, (m, 3)), (b.right, (m,)), (b.start, (m,)),
               (b.count, (m,)), (b.order, (n,))]
     if n == 0 or m == 0 or any(a.shape != s for a, s in shapes) or b.depth < 0:
         return False
     if not (np.isfinite(b.lo).all() and np.isfinite(b.hi).all()):
         return False
-    if n < PARALLEL_CHECK_FROM:
-        return _tree_holds(b, n, max_leaf) and _boxes_hold(b, p0, p1, p2, max_leaf)
-    from concurrent.futures import ThreadPoolExecutor
-
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        boxes = pool.submit(_boxes_hold, b, p0, p1, p2, max_leaf)
-        tree = _tree_holds(b, n, max_leaf)
-        return boxes.result() and tree
-
-
-def _tree_holds(b: BVHArrays, n: int, max_leaf: int) -> bool:
-    """:func:`valid_arrays`' checks but the boxes', on arrays of the right shapes."""
-    m = len(b.left)
     inner = b.left >= 0
     leaf = ~inner
-    idx = np.arange(m)
-    li, ri = b.left[inner], b.right[inner]
-    if (li <= idx[inner]).any() or (ri <= idx[inner]).any() or (li >= m).any() \
-            or (ri >= m).any() or (b.right[leaf] != -1).any() or (b.left[leaf] != -1).any():
+    ii = np.flatnonzero(inner)
+    li, ri = b.left[ii], b.right[ii]
+    if (li != ii + 1).any() or (ri <= li).any() or (ri >= m).any() \
+            or (b.left[leaf] != -1).any() or (b.right[leaf] != -1).any():
         return False
-    parents = np.bincount(np.concatenate([li, ri]), minlength=m)
+    parents = np.bincount(ri, minlength=m)   # the left children are ii + 1: one each
+    parents[li] += 1
     if parents[0] != 0 or (parents[1:] != 1).any():
         return False
     cnt, start = b.count[leaf], b.start[leaf]
-    if (b.count[inner] != 0).any() or (cnt < 1).any() or (cnt > max_leaf).any():
+    if (b.count[ii] != 0).any() or (cnt < 1).any() or (cnt > max_leaf).any():
         return False
-    if (start < 0).any() or (start + cnt > n).any():
-        return False
-    by_start = np.argsort(start, kind="stable")
-    ends = np.cumsum(cnt[by_start])
-    if ends[-1] != n or (start[by_start] != ends - cnt[by_start]).any():
+    ends = np.cumsum(cnt)
+    if ends[-1] != n or (start != ends - cnt).any():
         return False
     o = b.order
     if o.min() < 0 or o.max() >= n or (np.bincount(o, minlength=n) != 1).any():
@@ -1416,51 +1431,43 @@ def _tree_holds(b: BVHArrays, n: int, max_leaf: int) -> bool:
         if levels > b.depth:
             return False
         frontier = frontier[inner[frontier]]
-        frontier = np.concatenate([b.left[frontier], b.right[frontier]])
+        frontier = np.concatenate([frontier + 1, b.right[frontier]])
     return levels == b.depth
 
 
-#: Triangles a block of :func:`_boxes_hold`'s comparison of leaf boxes with corners.
-CHECK_BLOCK = 1 << 14
+def _boxes_hold(b: BVHArrays, tris) -> bool:
+    """Whether each leaf's box holds its triangles' corners and each child's box lies in
+    its parent's, on a tree :func:`_tree_holds` has passed (so that every index below is
+    in range). The corners are the float32 ones the traversal tests (``tris``, the
+    records of :func:`_triangle_records`, in leaf order): the boxes it reads
+    (:func:`pack_nodes`) are these boxes widened, so that a box that holds them lets no
+    hit be missed.
 
-
-def _boxes_hold(b: BVHArrays, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray,
-                max_leaf: int) -> bool:
-    """Whether children lie inside their parents' boxes and triangles inside their leaves'.
-
-    Run beside :func:`_tree_holds`, before the structure is known to be sound: indices
-    out of range end the check (False) rather than reading past an array, and the leaf
-    counts are bounded first, so that no count makes a large array."""
-    n, m = len(p0), len(b.left)
-    inner = b.left >= 0
-    leaf = ~inner
-    cnt, start = b.count[leaf], b.start[leaf]
-    if (cnt < 1).any() or (cnt > max_leaf).any() or int(cnt.sum()) != n:
-        return False
-    idx = np.flatnonzero(inner)
-    try:
-        lo_in, hi_in = np.take(b.lo, idx, axis=0), np.take(b.hi, idx, axis=0)
-        for k in (b.left[inner], b.right[inner]):
-            if (k < 0).any() or (k >= m).any():
-                return False
-            if (np.take(b.lo, k, axis=0) < lo_in).any() or \
-                    (np.take(b.hi, k, axis=0) > hi_in).any():
-                return False
-        by_start = np.argsort(start, kind="stable")
-        o = b.order
-        if o.min() < 0 or o.max() >= n:
-            return False
-        owner = np.empty(n, np.int64)   # the leaf of each triangle, in the caller's order
-        owner[o] = np.repeat(np.flatnonzero(leaf)[by_start], cnt[by_start])
-        # Block by block: small temporaries, reused (see mesh.FACE_NORMALS_BLOCK).
-        for s in range(0, n, CHECK_BLOCK):
-            t = slice(s, s + CHECK_BLOCK)
-            for box, pick, wrong in ((b.lo, np.minimum, np.greater),
-                                     (b.hi, np.maximum, np.less)):
-                corner = pick(p0[t], p1[t])
-                pick(corner, p2[t], out=corner)
-                if wrong(np.take(box, owner[t], axis=0), corner).any():
-                    return False
-    except (IndexError, ValueError):
-        return False
-    return True
+    One Dr.Jit kernel, a lane a triangle (and, in the first lanes, an inner node):
+    numpy's comparisons of rows of three took about 48 ms for the 1,000,000-triangle
+    knot, 88 ms in a process's first check (a throwaway script, issue 33)."""
+    n = len(b.order)
+    leaves = np.flatnonzero(b.left < 0)
+    inner = np.flatnonzero(b.left >= 0)
+    lo, hi = (upload(jit.Float, x, np.float32) for x in (b.lo, b.hi))
+    j = dr.arange(jit.UInt32, n)
+    owner = dr.gather(jit.UInt32, upload(jit.UInt32, np.repeat(leaves, b.count[leaves]),
+                                         np.uint32), j)
+    # lanes below the number of inner nodes also check inner node j's two children (an
+    # opaque count, so that the kernel is the same for every tree)
+    # (a tree of one leaf gathers from one dummy entry, in no lane)
+    q = j < dr.opaque(jit.UInt32, len(inner))
+    node, right = (dr.gather(jit.UInt32, upload(jit.UInt32, x if len(x) else [0], np.uint32),
+                             j, q) for x in (inner, b.right[inner]))
+    wrong = []
+    for a in range(3):
+        box_lo = dr.gather(jit.Float, lo, owner * 3 + a)
+        box_hi = dr.gather(jit.Float, hi, owner * 3 + a)
+        for k in range(3):
+            x = dr.gather(jit.Float, tris, j * 16 + (3 * k + a))
+            wrong.append(~((box_lo <= x) & (x <= box_hi)))   # NaN fails too
+        p_lo, p_hi = (dr.gather(jit.Float, x, node * 3 + a, q) for x in (lo, hi))
+        for child in (node + 1, right):
+            c_lo, c_hi = (dr.gather(jit.Float, x, child * 3 + a, q) for x in (lo, hi))
+            wrong.append(q & ~((p_lo <= c_lo) & (c_hi <= p_hi)))
+    return not bool(dr.any(any_mask(wrong))[0])

@@ -118,6 +118,10 @@ PENDING_BUDGET = 1 << 30
 #: TRACER_BYTES_PER_SAMPLE allows.
 FLAT_CHUNK_SAMPLES = 1 << 22
 FLAT_BYTES_PER_SAMPLE = 128
+#: Where no ray spawns another, a render's last chunk takes in a remainder of up to
+#: 1 / FLAT_TAIL_PART of a chunk (tracer/integrator.py's ``_chunk_spans``): at most
+#: FLAT_CHUNK_SAMPLES (1 + 1 / FLAT_TAIL_PART) samples in flight.
+FLAT_TAIL_PART = 4
 
 
 def chunk_samples(max_depth: int, spawns: bool = True) -> int:
@@ -133,6 +137,16 @@ def chunk_samples(max_depth: int, spawns: bool = True) -> int:
     while c > (1 << 16) and c * PENDING_BYTES_PER_SAMPLE * (max_depth + 1) > PENDING_BUDGET:
         c //= 2
     return c
+
+
+def flat_tail(chunk: int) -> int:
+    """The most samples a scene's last chunk takes in beyond ``chunk`` where no ray
+    spawns another (FLAT_TAIL_PART)."""
+    return chunk // FLAT_TAIL_PART
+
+
+#: The most samples a chunk holds where no ray spawns another.
+FLAT_MAX_CHUNK_SAMPLES = FLAT_CHUNK_SAMPLES + flat_tail(FLAT_CHUNK_SAMPLES)
 
 
 def _gib(n: float) -> str:
@@ -204,6 +218,7 @@ def check_render(scene, moments: bool = False, mitsuba: bool = False) -> None:
     if mitsuba:
         nbytes += pixels * per_pixel + pixels * spp * MITSUBA_BYTES_PER_SAMPLE
     else:
-        # (a chunk of FLAT_CHUNK_SAMPLES, where no ray spawns another, holds no more)
-        nbytes += pixels * per_pixel + max(CHUNK_SAMPLES, spp) * TRACER_BYTES_PER_SAMPLE
+        # a chunk: CHUNK_SAMPLES where rays spawn others, else up to FLAT_MAX_CHUNK_SAMPLES
+        nbytes += pixels * per_pixel + max(max(CHUNK_SAMPLES, spp) * TRACER_BYTES_PER_SAMPLE,
+                                           FLAT_MAX_CHUNK_SAMPLES * FLAT_BYTES_PER_SAMPLE)
     check_memory(nbytes, what)

@@ -248,8 +248,9 @@ def test_a_tree_read_again_comes_from_its_entry_and_equals_the_build(home, tmp_p
     assert len(_entries(home / "bvh")) == 2
 
 
-def _mutations(b: bvh.BVHArrays, n: int):
-    """(what, arrays) with one invariant of a tree broken, each a way a walk goes wrong."""
+def _mutations(b: bvh.BVHArrays, n: int, corners):
+    """(what, arrays) with one invariant of a tree broken, each a way a walk goes wrong
+    (``corners``: the triangles' p0, p1, p2)."""
     inner = np.flatnonzero(b.left >= 0)
     leaves = np.flatnonzero(b.left < 0)
 
@@ -265,38 +266,52 @@ def _mutations(b: bvh.BVHArrays, n: int):
     yield "child out of range", changed(right=lambda a: a.__setitem__(i, len(a)))
     yield "a node with two parents", changed(right=lambda a: a.__setitem__(
         inner[0], b.left[inner[0]] if b.left[inner[0]] > inner[0] else a[inner[0]]))
+    yield "children swapped (not depth-first)", changed(
+        left=lambda a: a.__setitem__(inner[0], b.right[inner[0]]),
+        right=lambda a: a.__setitem__(inner[0], b.left[inner[0]]))
     yield "leaf past the triangles", changed(start=lambda a: a.__setitem__(j, n))
+    two = leaves[b.count[leaves] == b.count[j]][:2]   # two leaves of one size, ranges swapped
+    yield "leaves' ranges out of node order", changed(
+        start=lambda a: a.__setitem__(two, a[two[::-1]]))
     yield "empty leaf", changed(count=lambda a: a.__setitem__(j, 0))
     yield "leaf over the count field", changed(count=lambda a: a.__setitem__(j, 8))
     yield "order not a permutation", changed(order=lambda a: a.__setitem__(0, a[1]))
     yield "order out of range", changed(order=lambda a: a.__setitem__(0, n))
     yield "a leaf's box misses a triangle", changed(hi=lambda a: a.__setitem__(
-        (j, 0), np.nextafter(a[j, 0], -np.inf, dtype=np.float32)))
+        (j, 0), np.nextafter(_leaf_corner_x(b, corners, j), -np.inf, dtype=np.float32)))
     yield "a child outside its parent's box", changed(lo=lambda a: a.__setitem__(
         (b.left[i], 1), np.float32(a[i, 1] - 1)))
+    yield "a right child outside its parent's box", changed(hi=lambda a: a.__setitem__(
+        (b.right[inner[0]], 2), np.float32(a[inner[0], 2] + 1)))
     yield "a box not finite", changed(lo=lambda a: a.__setitem__((0, 2), np.nan))
     yield "arrays of another length", changed(order=lambda a: None, count=b.count[:-1].copy())
 
 
-@pytest.mark.parametrize("parallel,block", [(False, None), (True, None), (True, 7)],
-                         ids=["one thread", "boxes beside", "boxes beside, blocks of 7"])
-def test_every_broken_invariant_fails_the_check(tmp_path, monkeypatch, parallel, block):
-    """Each broken invariant fails the check, whether the boxes are checked after the
-    structure or beside it, on a second thread (bvh.PARALLEL_CHECK_FROM), and whether
-    the leaves' boxes meet the corners in one block or in many (bvh.CHECK_BLOCK)."""
-    monkeypatch.setattr(bvh, "PARALLEL_CHECK_FROM", 1 if parallel else 1 << 62)
-    if block is not None:
-        monkeypatch.setattr(bvh, "CHECK_BLOCK", block)
+def _leaf_corner_x(b: bvh.BVHArrays, corners, j: int) -> np.float32:
+    """The largest x of leaf ``j``'s triangles' corners, rounded to float32 as the
+    traversal's records hold them."""
+    tris = b.order[b.start[j]:b.start[j] + b.count[j]]
+    return max(np.float32(c[t, 0]) for c in corners for t in tris)
+
+
+def test_every_broken_invariant_fails_the_check(tmp_path):
+    """Each broken invariant fails the check, and a leaf's box that meets its triangles'
+    largest float32 corner exactly still holds them."""
     p = _knot_corners(tmp_path)
     b = bvh.build_bvh(*p)
     assert bvh.valid_arrays(b, *p)
-    for what, bad in _mutations(b, len(p[0])):
+    for what, bad in _mutations(b, len(p[0]), p):
         assert not bvh.valid_arrays(bad, *p), what
     deeper = bvh.BVHArrays(b.lo, b.hi, b.left, b.right, b.start, b.count, b.order,
                            b.depth + 1, 0.0)
     assert not bvh.valid_arrays(deeper, *p), "depth"   # the traversal stack's size
     # the same tree over moved triangles: boxes no longer hold them
     assert not bvh.valid_arrays(b, *[q + 0.01 for q in p])
+    j = np.flatnonzero(b.left < 0)[0]
+    tight = bvh.BVHArrays(b.lo, b.hi.copy(), b.left, b.right, b.start, b.count, b.order,
+                          b.depth, 0.0)
+    tight.hi[j, 0] = _leaf_corner_x(b, p, j)
+    assert bvh.valid_arrays(tight, *p)
 
 
 def test_a_tampered_tree_is_built_again_and_replaced(home, tmp_path, monkeypatch):
@@ -305,7 +320,7 @@ def test_a_tampered_tree_is_built_again_and_replaced(home, tmp_path, monkeypatch
     [entry] = _entries(home / "bvh")
     a = cache.read_arrays(entry, bvh._ARRAY_KINDS)
     a = {k: np.array(v) for k, v in a.items()}
-    a["hi"][np.flatnonzero(a["left"] < 0)[0]] -= 0.5    # a leaf's box misses its triangles
+    a["hi"][np.flatnonzero(a["right"] < 0)[0]] -= 0.5   # a leaf's box misses its triangles
     entry.write_bytes(cache.pack_arrays(a))
     bvh._RECENT.clear()
     calls = []

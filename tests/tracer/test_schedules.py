@@ -157,3 +157,32 @@ def test_seeds_rendered_together_are_the_renders_of_each_seed(name, jitter, sche
         if name == "emitter_in_glass":   # the point light's shadow rays: once, not 3 times
             assert sum(together[0].shadow_rays_per_level) < len(seeds) * sum(
                 alone.shadow_rays_per_level)
+
+
+def test_a_small_remainder_joins_the_last_chunk_where_no_ray_spawns_another():
+    """Where no ray spawns another, a remainder of at most a quarter chunk
+    (tracer.limits.FLAT_TAIL_PART) joins the chunk before it instead of being traced as
+    a chunk of its own; a larger one, or any where rays spawn others, stays apart. The
+    image is the same bit for bit however the pixels are chunked."""
+    from whitted.tracer import limits
+    from whitted.tracer.integrator import _chunk_spans
+
+    assert _chunk_spans(10, 4, 2) == [(0, 4), (4, 6)]        # a remainder of 2 joins
+    assert _chunk_spans(11, 4, 2) == [(0, 4), (4, 4), (8, 3)]
+    assert _chunk_spans(3, 4, 2) == [(0, 3)]
+    assert _chunk_spans(8, 4, 2) == [(0, 4), (4, 4)]
+    assert _chunk_spans(9, 4, 0) == [(0, 4), (4, 4), (8, 1)]
+    flat = load_scene(resolve_scene("three_lights")).with_overrides(size=(40, 30), spp=4)
+    per_chunk = 4 * 290   # 290 pixels: four chunks and a remainder of 40, which joins
+    joined = Integrator(flat, chunk_samples=per_chunk)
+    assert joined.tail_samples == limits.flat_tail(per_chunk) == per_chunk // 4
+    done = []
+    image = joined.render(progress=lambda n, total: done.append(n)).image
+    assert done == [290, 580, 870, 1200]
+    apart = Integrator(flat, chunk_samples=per_chunk)
+    apart.tail_samples = 0
+    done.clear()
+    assert np.array_equal(apart.render(progress=lambda n, total: done.append(n)).image, image)
+    assert done == [290, 580, 870, 1160, 1200]
+    glass = load_scene(resolve_scene("glass_sphere")).with_overrides(size=(40, 30), spp=4)
+    assert Integrator(glass, chunk_samples=per_chunk).tail_samples == 0
