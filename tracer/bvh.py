@@ -77,7 +77,7 @@ from whitted.tracer.backend import aligned_zeros, any_mask, greater, jit, lesser
 from whitted.tracer.shapes import triangle as tri_f
 
 __all__ = ["BVH", "BVHArrays", "INVALID", "build_box_bvh", "build_bvh", "pack_nodes",
-           "sah_cost", "shared_bvh"]
+           "sah_cost", "shared_bvh", "shared_mesh_bvh"]
 
 #: Triangle index reported for a ray that hits nothing.
 INVALID = 0xFFFFFFFF
@@ -910,6 +910,29 @@ def _triangle_records(perm, corners) -> object:
     return tris
 
 
+def _mesh_records(perm, p, faces) -> object:
+    """:func:`_triangle_records` of the triangles of a mesh as uploaded: ``p`` its
+    vertices (jit.Array3f, float32), ``faces`` three vertex indices a triangle
+    (jit.UInt32). The same numbers bit for bit, since a vertex rounded to float32 once
+    is the corner rounded to float32; gathered by one kernel from arrays the mesh
+    uploads anyway, where the corners' way gathers (N, 3) float64 corners on the host
+    and uploads them (issue 33)."""
+    if dr.width(perm) == 0:
+        return upload(jit.Float, np.zeros(0), np.float32)
+    i = dr.arange(jit.UInt32, 16 * dr.width(perm))   # record i >> 4, slot i & 15
+    slot = i & 15
+    k = slot // 3                       # the corner; 3 to 5 for the unused slots
+    axis = slot - 3 * k
+    used = k < 3
+    vertex = dr.gather(jit.UInt32, faces, dr.gather(jit.UInt32, perm, i >> 4) * 3 + k, used)
+    tris = dr.zeros(jit.Float, dr.width(i))
+    for a in range(3):
+        here = used & (axis == a)
+        tris = dr.select(here, dr.gather(jit.Float, p[a], vertex, here), tris)
+    dr.eval(tris)
+    return tris
+
+
 def _outward(lo: np.ndarray, hi: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """float32 boxes that contain the float64 ones, widened as :func:`pack_nodes` says.
 
@@ -962,19 +985,34 @@ class BVH:
     def __init__(self, p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, *,
                  arrays: BVHArrays | None = None, **build_options):
         p0, p1, p2 = (np.asarray(p, dtype=np.float64).reshape(-1, 3) for p in (p0, p1, p2))
-        self.arrays = arrays if arrays is not None else build_bvh(p0, p1, p2, **build_options)
-        self.build_seconds = self.arrays.seconds
-        self.node_count = len(self.arrays.left)
-        self.triangle_count = len(p0)
-        self.depth = self.arrays.depth
-        rec, self._root, self._stack = pack_nodes(self.arrays)
+        self._place(arrays if arrays is not None else build_bvh(p0, p1, p2, **build_options),
+                    len(p0))
+        self.tris = _triangle_records(self.perm, (p0, p1, p2))
+
+    @classmethod
+    def from_records(cls, arrays: BVHArrays, count: int, records) -> BVH:
+        """The BVH of the tree ``arrays`` over ``count`` triangles whose records
+        ``records(perm)`` gives (:func:`_triangle_records`' records, in the order of
+        ``perm``, a jit.UInt32): for triangles a caller holds on the device already
+        (:func:`shared_mesh_bvh`)."""
+        bvh = cls.__new__(cls)
+        bvh._place(arrays, count)
+        bvh.tris = records(bvh.perm)
+        return bvh
+
+    def _place(self, arrays: BVHArrays, count: int) -> None:
+        """Everything but the triangle records: the tree's nodes packed and uploaded."""
+        self.arrays = arrays
+        self.build_seconds = arrays.seconds
+        self.node_count = len(arrays.left)
+        self.triangle_count = count
+        self.depth = arrays.depth
+        rec, self._root, self._stack = pack_nodes(arrays)
         # Records start on a 64-byte boundary (backend.upload), so that a record of 16
         # floats fills one cache line instead of straddling two (measured: 1.7x faster
         # traversal than a random alignment).
         self.nodes = upload(jit.Float, rec if len(rec) else np.zeros((1, 16)), np.float32)
-        o = self.arrays.order
-        self.perm = upload(jit.UInt32, o, np.uint32)
-        self.tris = _triangle_records(self.perm, (p0, p1, p2))
+        self.perm = upload(jit.UInt32, arrays.order, np.uint32)
 
     def triangles(self) -> tuple:
         """(p0, p1, p2) as jit.Array3f in leaf order (index i is original ``perm[i]``)."""
@@ -1290,14 +1328,42 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, key: str | None =
     p0, p1, p2 = (np.ascontiguousarray(p, dtype=np.float64).reshape(-1, 3)
                   for p in (p0, p1, p2))
     # one key of the corners serves both caches
-    corners = content_key(p0, p1, p2) if key is None else key
-    if len(p0) > RECENT_MAX_TRIANGLES:
-        return _kept_on_disk(p0, p1, p2, corners)
-    recent = (backend.name(), corners)
+    return _shared(_Triangles(len(p0), lambda: (p0, p1, p2),
+                              lambda perm: _triangle_records(perm, (p0, p1, p2))),
+                   content_key(p0, p1, p2) if key is None else key)
+
+
+def shared_mesh_bvh(vertices: np.ndarray, faces: np.ndarray, key: str, p, face_ids) -> BVH:
+    """:func:`shared_bvh` of a mesh's triangles ``vertices[faces[:, k]]`` (k = 0, 1, 2),
+    under ``key`` (their corners' key, as there), whose vertices and faces the caller
+    has uploaded (``p``, jit.Array3f; ``face_ids``, jit.UInt32, three a triangle). The
+    float64 corners are gathered only where a tree is built; the records come from the
+    uploads (:func:`_mesh_records`)."""
+    faces = np.asarray(faces).reshape(-1, 3)
+    return _shared(_Triangles(len(faces),
+                              lambda: tuple(np.take(vertices, faces[:, k], axis=0)
+                                            for k in range(3)),
+                              lambda perm: _mesh_records(perm, p, face_ids)), key)
+
+
+@dataclass
+class _Triangles:
+    """The triangles of a tree: how many, their corners (p0, p1, p2), each (N, 3) float64,
+    asked for only to build a tree, and their records in the order of a permutation."""
+    count: int
+    corners: object   # () -> (p0, p1, p2)
+    records: object   # perm (jit.UInt32) -> jit.Float, as _triangle_records
+
+
+def _shared(tris: _Triangles, key: str) -> BVH:
+    """:func:`shared_bvh`'s two caches, the corners' ``key`` given."""
+    if tris.count > RECENT_MAX_TRIANGLES:
+        return _kept_on_disk(tris, key)
+    recent = (backend.name(), key)
     if recent in _RECENT:
         _RECENT.move_to_end(recent)
         return _RECENT[recent]
-    bvh = _RECENT[recent] = _kept_on_disk(p0, p1, p2, corners)
+    bvh = _RECENT[recent] = _kept_on_disk(tris, key)
     while len(_RECENT) > RECENT_COUNT:
         _RECENT.popitem(last=False)
     return bvh
@@ -1325,14 +1391,15 @@ def disk_folder():
     return cache.home() / "bvh"
 
 
-def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, corners: str) -> BVH:
-    """``BVH(p0, p1, p2)``, its tree read from the disk cache when one was kept for the
+def _kept_on_disk(tris: _Triangles, corners: str) -> BVH:
+    """The BVH of ``tris``, its tree read from the disk cache when one was kept for the
     same corners (``corners``: their key, :func:`shared_bvh`'s) by the same builder
     (this module's source) and it passes :func:`valid_arrays`; else built, and kept."""
     from whitted.tracer import cache
 
-    if len(p0) < DISK_MIN_TRIANGLES:
-        return BVH(p0, p1, p2)
+    n = tris.count
+    if n < DISK_MIN_TRIANGLES:
+        return BVH.from_records(build_bvh(*tris.corners()), n, tris.records)
     key = cache.content_key(cache.source_digest(__file__), corners)
     entry = disk_folder() / f"{key}.arrays"
     t0 = time.perf_counter()
@@ -1340,12 +1407,12 @@ def _kept_on_disk(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, corners: str) 
     if a is not None and a["depth"].shape == (1,) and a["right"].shape == a["count"].shape:
         arrays = _stored(a, time.perf_counter() - t0)
         # valid_arrays' two steps, the boxes checked on the records the BVH reads
-        if _tree_holds(arrays, len(p0), (1 << COUNT_BITS) - 1):
-            bvh = BVH(p0, p1, p2, arrays=arrays)
+        if _tree_holds(arrays, n, (1 << COUNT_BITS) - 1):
+            bvh = BVH.from_records(arrays, n, tris.records)
             if _boxes_hold(arrays, bvh.tris):
                 cache.touch(entry)
                 return bvh
-    bvh = BVH(p0, p1, p2)
+    bvh = BVH.from_records(build_bvh(*tris.corners()), n, tris.records)
     b = bvh.arrays
     cache.keep_entry(entry, {"lo": b.lo, "hi": b.hi, "right": b.right.astype(np.int32),
                              "count": b.count.astype(np.uint8),

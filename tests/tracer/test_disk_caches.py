@@ -413,3 +413,36 @@ def test_a_placed_mesh_keys_its_normals_and_tree_by_its_file_and_its_placement(
     # another file: another key
     meshio.write_ply(tmp_path / "blob.ply", v * 2.0, f)
     assert meshes()[0].key != first[0].key
+
+
+def test_a_meshs_tree_takes_its_records_from_the_uploaded_vertices(home, tmp_path, monkeypatch):
+    """shared_mesh_bvh gathers the triangle records from the mesh's float32 vertices and
+    faces as uploaded: the records of the corners' way (shared_bvh) bit for bit, built or
+    read from disk, with no float64 corners gathered for a tree read back."""
+    import sys
+
+    from conftest import SCENES
+    sys.path.insert(0, str(SCENES / "meshes"))
+    from generate import torus_knot
+
+    from whitted.tracer.backend import jit
+    from whitted.tracer.shapes import base
+
+    v, f = torus_knot(40, 12)
+    v = np.asarray(v, np.float64) * 1.37 + 0.1   # corners not exactly float32
+    f = np.asarray(f)
+    p, faces = base.v3(v), base.uints(f.reshape(-1))
+    corners = [v[f[:, k]] for k in range(3)]
+    by_corners = bvh.BVH(*corners)
+    key = cache.content_key(v, f)
+    built = bvh.shared_mesh_bvh(v, f, key, p, faces)
+    np.testing.assert_array_equal(built.tris.numpy(), by_corners.tris.numpy())
+    bvh._RECENT.clear()
+    real = bvh._Triangles
+    monkeypatch.setattr(bvh, "_Triangles", lambda count, corners, records: real(
+        count, lambda: pytest.fail("corners gathered"), records))
+    read = bvh.shared_mesh_bvh(v, f, key, p, faces)
+    assert len(_entries(home / "bvh")) == 1 and read is not built
+    np.testing.assert_array_equal(read.tris.numpy(), by_corners.tris.numpy())
+    np.testing.assert_array_equal(read.nodes.numpy(), by_corners.nodes.numpy())
+    assert isinstance(read.perm, jit.UInt32)

@@ -123,14 +123,18 @@ def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
     return content_key(v, f)
 
 
-def _tree(v: np.ndarray, f: np.ndarray, key: str | None):
-    """:func:`tracer.bvh.shared_bvh` of the mesh's triangles under ``key``, else under
-    :func:`_tree_key` (:func:`_tree_beside_key` for a large mesh)."""
-    from whitted.tracer.bvh import shared_bvh
+def _tree(v: np.ndarray, f: np.ndarray, key: str | None, p, faces):
+    """The BVH of the mesh's triangles: :func:`tracer.bvh.shared_mesh_bvh` under ``key``
+    (the records gathered from its uploaded vertices ``p`` and ``faces``), else
+    :func:`tracer.bvh.shared_bvh` under :func:`_tree_key` (:func:`_tree_beside_key` for a
+    large mesh)."""
+    from whitted.tracer.bvh import shared_bvh, shared_mesh_bvh
 
-    if key is None and len(f) >= PARALLEL_KEY_FROM:
+    if key is not None:
+        return shared_mesh_bvh(v, f, key, p, faces)
+    if len(f) >= PARALLEL_KEY_FROM:
         return _tree_beside_key(v, f)
-    return shared_bvh(*_corners(v, f), key=key or _tree_key(v, f))
+    return shared_bvh(*_corners(v, f), key=_tree_key(v, f))
 
 
 def _tree_beside_key(v: np.ndarray, f: np.ndarray):
@@ -174,9 +178,9 @@ class Block(base.Block):
     def __init__(self, mesh: Mesh):
         v, f = np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces)
         self.count = len(f)
-        self.bvh = _tree(v, f, mesh.key)
         self.faces = base.uints(f.reshape(-1))
         self.p = base.v3(v)
+        self.bvh = _tree(v, f, mesh.key, self.p, self.faces)
         self.vn = None if mesh.normals is None else base.v3(mesh.normals)
         self.vt = None
         if mesh.uvs is not None:
