@@ -446,3 +446,67 @@ def test_a_meshs_tree_takes_its_records_from_the_uploaded_vertices(home, tmp_pat
     np.testing.assert_array_equal(read.tris.numpy(), by_corners.tris.numpy())
     np.testing.assert_array_equal(read.nodes.numpy(), by_corners.nodes.numpy())
     assert isinstance(read.perm, jit.UInt32)
+
+
+def test_a_settled_file_is_known_by_its_identity_and_a_change_is_seen(home, tmp_path,
+                                                                     monkeypatch):
+    """A file whose times are settled (SETTLED_NS old) has its identity noted beside its
+    entry: read again, its bytes are neither read nor hashed. A change of the file (here
+    the same size, its modification time put back) changes its change time, and so its
+    identity: the new bytes are read, hashed and parsed. A file just written (times not
+    settled) is not noted."""
+    import builtins
+    import time
+
+    path = _sphere_obj(tmp_path / "s.obj")
+    load_mesh(path)
+    assert not list((home / "meshes").glob("*.identity"))   # just written: not settled
+    monkeypatch.setattr(meshio, "SETTLED_NS", 0)
+    meshio.clear_cache()
+    first = load_mesh(path)
+    [note] = list((home / "meshes").glob("*.identity"))
+    assert os.stat(note).st_mode & 0o777 == 0o600
+    meshio.clear_cache()
+    real_open = builtins.open
+
+    def no_read(file, *a, **k):
+        assert os.fspath(file) != os.fspath(path), "the file was read"
+        return real_open(file, *a, **k)
+
+    with monkeypatch.context() as m:
+        m.setattr(builtins, "open", no_read)
+        _no_parse(m)
+        again = load_mesh(path)
+    assert again.key == first.key
+    np.testing.assert_array_equal(again.vertices, first.vertices)
+    # the same size, other bytes, the modification time put back: another identity (the
+    # change time a clock tick later: the file system's clock may be as coarse as 10 ms)
+    time.sleep(0.05)
+    before = os.stat(path)
+    text = path.read_bytes().replace(b"v 0.", b"v 1.", 1)
+    assert len(text) == before.st_size
+    path.write_bytes(text)
+    os.utime(path, ns=(before.st_atime_ns, before.st_mtime_ns))
+    meshio.clear_cache()
+    changed = load_mesh(path)
+    assert changed.key != first.key
+    assert not np.array_equal(changed.vertices, first.vertices)
+
+
+@pytest.mark.parametrize("how", ["not hex", "too short", "another kind"])
+def test_a_wrong_identity_note_is_not_used(home, tmp_path, monkeypatch, how):
+    """A note that does not hold one entry's name (64 hex digits) is passed over: the
+    file is read and hashed, and its own entry used."""
+    monkeypatch.setattr(meshio, "SETTLED_NS", 0)
+    path = _sphere_obj(tmp_path / "s.obj")
+    first = load_mesh(path)
+    [note] = list((home / "meshes").glob("*.identity"))
+    arrays = {"not hex": {"entry": np.frombuffer(b"g" * 64, np.uint8)},
+              "too short": {"entry": np.frombuffer(b"a" * 63, np.uint8)},
+              "another kind": {"entry": np.zeros(64, np.float64)}}[how]
+    note.write_bytes(cache.pack_arrays(arrays))
+    os.chmod(note, 0o600)
+    meshio.clear_cache()
+    assert meshio._known_bytes(meshio._identity(path) + (None,)) is None
+    again = load_mesh(path)
+    assert again.key == first.key
