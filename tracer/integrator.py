@@ -324,7 +324,7 @@ class _Radiance:
 
 
 def _chunk_spans(total: int, per_chunk: int, tail: int) -> list[tuple[int, int]]:
-    """(first, count) of each chunk of ``total`` pixels: ``per_chunk`` pixels each, but
+    """(first, count) of each chunk of ``total`` pixels: ``per_chunk`` pixels each, except
     that a remainder of at most ``tail`` pixels joins the chunk before it. Each chunk's
     kernel is traced anew from Python (about 15 ms at 2^22 samples), however few its
     samples: 640 x 480 at 16 spp in chunks of 2^22 samples left a last chunk of 17 %,
