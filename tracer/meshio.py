@@ -298,10 +298,12 @@ def _known_bytes(key: tuple) -> str | None:
 
 def _know_bytes(key: tuple, stem: str) -> None:
     """Note ``stem`` (the entry's name of the bytes just hashed) for the file of ``key``,
-    where the file's times are settled (:data:`SETTLED_NS` old). A file changes its
-    change time, and a new file at the same inode has its own: with the times settled,
-    any later change shows in the identity, however coarse the file system's clock, as
-    git's index treats a file written within its clock's tick as changed ("racy git")."""
+    where the file's times are settled (:data:`SETTLED_NS` old). A write changes a file's
+    change time (which no program can set back), and a new file at the same inode has
+    its own. With the times at least 2 s older than the hashing, a later change gets a
+    later time on any file system whose clock ticks at most every 2 s (FAT's does, for
+    its modification time): the change shows in the identity. Git's index treats a file
+    written within its clock's tick as changed for the same reason ("racy git")."""
     from whitted.tracer import cache
 
     _, _, _, _, mtime, ctime = key[:-1]
