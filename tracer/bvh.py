@@ -1320,9 +1320,9 @@ def shared_bvh(p0: np.ndarray, p1: np.ndarray, p2: np.ndarray, key: str | None =
     (:func:`_kept_on_disk`), for the next process.
 
     The corners' key is a SHA-256 of them, or ``key``, where the caller has a hash of
-    what determines them (:func:`tracer.cache.content_key` of a mesh's vertices and
-    faces, hashed while the corners are gathered: :class:`tracer.shapes.mesh.Block`);
-    different corners must never share a key.
+    what determines them (a mesh's placed file, or :func:`tracer.cache.content_key` of its
+    vertices and faces: :func:`tracer.shapes.mesh._tree`, which comes through
+    :func:`shared_mesh_bvh`); different corners must never share a key.
     """
     from whitted.tracer.cache import content_key
 

@@ -541,16 +541,13 @@ def test_a_few_boxes_make_their_tree_on_the_host_rounded_as_the_device_rounds(ji
     assert max(costs) < 1.1
 
 
-@pytest.mark.parametrize("beside", [False, True], ids=["one thread", "key beside"])
-def test_meshes_sharing_vertices_but_not_faces_get_trees_of_their_own(jit, monkeypatch,
-                                                                      beside):
-    """A mesh's tree is keyed by a hash of its vertices and faces (shapes.mesh._tree_key;
-    from PARALLEL_KEY_FROM triangles on, hashed beside the corners' gathering): a
-    mesh with the same vertices and other faces, or the same faces and a vertex moved,
-    gets its own tree, over its own corners; the same mesh again gets the first one's."""
+def test_meshes_sharing_vertices_but_not_faces_get_trees_of_their_own(jit):
+    """A mesh without a key of its own (a file not kept parsed on disk) has its tree keyed
+    by a hash of its vertices and faces (shapes.mesh._tree_key): a mesh with the same
+    vertices and other faces, or the same faces and a vertex moved, gets its own tree,
+    over its own corners; the same mesh again gets the first one's."""
     from whitted.tracer.shapes import mesh
 
-    monkeypatch.setattr(mesh, "PARALLEL_KEY_FROM", 1 if beside else 1 << 62)
     rng = np.random.default_rng(21)
     v = rng.normal(size=(120, 3))
     f = rng.integers(0, len(v), size=(300, 3))

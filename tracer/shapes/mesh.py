@@ -104,19 +104,8 @@ def pack(members: list, packing) -> list:
     return out
 
 
-#: Meshes of this many triangles or more hash their tree's key (where the mesh has none,
-#: :attr:`Mesh.key`) beside the corners' gathering, on a thread of their own
-#: (:class:`Block`; the 1,000,000-triangle knot's key about 20-40 ms).
-PARALLEL_KEY_FROM = 1 << 15
-
-
-def _corners(v: np.ndarray, f: np.ndarray) -> list:
-    """The triangles' corners (p0, p1, p2), each (F, 3) float64."""
-    return [np.take(v, f[:, k], axis=0) for k in range(3)]
-
-
 def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
-    """The key of the tree of a mesh without :attr:`Mesh.key` (:func:`tracer.bvh.shared_bvh`):
+    """The key of the tree of a mesh without :attr:`Mesh.key` (:func:`_tree`):
     a hash of its vertices and faces, which give its corners, and half their bytes."""
     from whitted.tracer.cache import content_key
 
@@ -124,30 +113,12 @@ def _tree_key(v: np.ndarray, f: np.ndarray) -> str:
 
 
 def _tree(v: np.ndarray, f: np.ndarray, key: str | None, p, faces):
-    """The BVH of the mesh's triangles: :func:`tracer.bvh.shared_mesh_bvh` under ``key``
-    (the records gathered from its uploaded vertices ``p`` and ``faces``), else
-    :func:`tracer.bvh.shared_bvh` under :func:`_tree_key` (:func:`_tree_beside_key` for a
-    large mesh)."""
-    from whitted.tracer.bvh import shared_bvh, shared_mesh_bvh
+    """:func:`tracer.bvh.shared_mesh_bvh` of the mesh's triangles (the records gathered
+    from its uploaded vertices ``p`` and ``faces``), under ``key``, else under
+    :func:`_tree_key`."""
+    from whitted.tracer.bvh import shared_mesh_bvh
 
-    if key is not None:
-        return shared_mesh_bvh(v, f, key, p, faces)
-    if len(f) >= PARALLEL_KEY_FROM:
-        return _tree_beside_key(v, f)
-    return shared_bvh(*_corners(v, f), key=_tree_key(v, f))
-
-
-def _tree_beside_key(v: np.ndarray, f: np.ndarray):
-    """:func:`_tree` of a large mesh without a key: the key hashed on a second core while
-    the corners are gathered (hashing lets go of Python's lock)."""
-    from concurrent.futures import ThreadPoolExecutor
-
-    from whitted.tracer.bvh import shared_bvh
-
-    with ThreadPoolExecutor(max_workers=1) as pool:
-        hashed = pool.submit(_tree_key, v, f)
-        corners = _corners(v, f)
-        return shared_bvh(*corners, key=hashed.result())
+    return shared_mesh_bvh(v, f, key if key is not None else _tree_key(v, f), p, faces)
 
 
 def face_normal(p0, p1, p2):
