@@ -367,7 +367,7 @@ def vertex_normals(vertices: np.ndarray, faces: np.ndarray, key: str | None = No
     if a is not None and a["normals"].shape == v.shape:
         n = a["normals"]
         with np.errstate(invalid="ignore"):
-            unit = np.abs(_length(n) - 1.0) <= 1e-12
+            unit = np.abs(row_lengths(n) - 1.0) <= 1e-12
         if unit.all():
             cache.touch(entry)
             return n.copy()
@@ -629,19 +629,14 @@ def _face_terms(v: list, f: np.ndarray, n_out: np.ndarray, w_out: np.ndarray) ->
 
 def _length3(x: np.ndarray, y: np.ndarray, z: np.ndarray) -> np.ndarray:
     """The Euclidean lengths of the vectors (x, y, z), given as columns, the squares summed
-    as (x^2 + z^2) + y^2: the order in which numpy's einsum (:func:`_length`) summed a row
-    of three on the AVX-512 machine this was measured on (all of 3,000,000 random rows at
-    three scales). Written out, the vertex normals no longer depend on how a numpy
-    build's einsum orders its sum."""
+    as (x^2 + z^2) + y^2: the order in which numpy's einsum (``"ij,ij->i"``), which the
+    vertex normals used before, summed a row of three on the AVX-512 machine this was
+    measured on (all of 3,000,000 random rows at three scales). Written out, the vertex
+    normals no longer depend on how a numpy build's einsum orders its sum."""
     s = x * x
     s += z * z
     s += y * y
     return np.sqrt(s, out=s)
-
-
-def _length(a: np.ndarray) -> np.ndarray:
-    """The Euclidean length of each row (einsum: no (N, 3) temporary, unlike linalg.norm)."""
-    return np.sqrt(np.einsum("ij,ij->i", a, a))
 
 
 def row_lengths(a: np.ndarray) -> np.ndarray:
@@ -649,8 +644,8 @@ def row_lengths(a: np.ndarray) -> np.ndarray:
     ``np.linalg.norm(a, axis=1)`` (which sums x^2 + y^2 + z^2 in that order), written
     column by column: numpy's reduction along a row of three is about three times as
     long (the 1,000,000-triangle knot's 500,000 normals: 14 ms against 4.5 ms). Not
-    :func:`_length`, whose einsum sums in another order (other last bits), which the
-    vertex normals keep."""
+    :func:`_length3`, which sums in another order (other last bits), the one the vertex
+    normals keep."""
     s = a[:, 0] * a[:, 0]
     s += a[:, 1] * a[:, 1]
     s += a[:, 2] * a[:, 2]
